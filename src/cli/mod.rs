@@ -1,0 +1,48 @@
+//! The `step` command line: one clap subcommand per job, each a thin call into the library.
+//!
+//! Errors reach the user as one `error: …` line with its causes, never a panic; the exit code is 1 for
+//! a failed command and 2 for a usage error (clap's own).
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(name = "step", version, about = "Offline subgoal-tree task planner for robots (STEP)")]
+pub struct Cli {
+    /// Log filter (tracing's EnvFilter syntax), e.g. `info` or `step=debug`; also RUST_LOG.
+    #[arg(long, global = true)]
+    pub log: Option<String>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {}
+
+/// Entry point of the binary: parse, set up logging, run, report.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_tracing(cli.log.as_deref());
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(command: Command) -> anyhow::Result<()> {
+    match command {}
+}
+
+fn init_tracing(filter: Option<&str>) {
+    use tracing_subscriber::EnvFilter;
+    let filter = match filter {
+        Some(f) => EnvFilter::new(f),
+        None => EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")),
+    };
+    // Logs go to stderr so that stdout stays clean for JSON and plans.
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}

@@ -1,0 +1,32 @@
+//! The runtime's one error type: every failure names the file, key or grammar at fault and, where
+//! there is one, the fix.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum LlmError {
+    #[error("model not found: {what}\n  fix: {hint}")]
+    ModelNotFound { what: String, hint: String },
+    #[error("{path}: not a GGUF model file ({reason})")]
+    NotGguf { path: PathBuf, reason: String },
+    #[error("{path}: truncated or damaged GGUF file: {detail}")]
+    Truncated { path: PathBuf, detail: String },
+    #[error("{path}: unsupported model architecture '{arch}' (supported: llama, qwen2)")]
+    UnsupportedArch { path: PathBuf, arch: String },
+    #[error("{path}: GGUF metadata '{key}' is missing or malformed: {detail}")]
+    Metadata { path: PathBuf, key: String, detail: String },
+    #[error("tokenizer: {0}")]
+    Tokenizer(String),
+    #[error("chat template: {0}")]
+    Template(String),
+    #[error("grammar: {0}")]
+    Grammar(String),
+    #[error("decoding: {0}")]
+    Decode(String),
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error(transparent)]
+    Candle(#[from] candle_core::Error),
+}
+
+pub type Result<T, E = LlmError> = std::result::Result<T, E>;

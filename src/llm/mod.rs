@@ -1,0 +1,3 @@
+//! The local LLM runtime (placeholder: issue 3).
+pub mod error;
+pub use error::{LlmError, Result};
