@@ -1,3 +1,5 @@
-//! The local LLM runtime (placeholder: issue 3).
+//! The local LLM runtime (in progress: issue 3).
 pub mod error;
+pub mod gguf;
+pub mod model;
 pub use error::{LlmError, Result};
