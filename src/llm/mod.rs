@@ -1,3 +1,5 @@
 //! The local LLM runtime (placeholder: issue 3).
 pub mod error;
+pub mod gguf;
+pub mod tiny;
 pub use error::{LlmError, Result};
