@@ -5,6 +5,7 @@
 //! Validation reads only the header (metadata and tensor table): tensor data is checked against
 //! the file length, not read, so opening a 500 MB model costs milliseconds.
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -180,14 +181,41 @@ impl GgufFile {
         format!("{}.{suffix}", self.arch.gguf_name())
     }
 
+    /// Typed access to the metadata; errors name this file and the key.
+    pub fn metadata(&self) -> Metadata<'_> {
+        Metadata {
+            path: &self.path,
+            map: &self.content.metadata,
+        }
+    }
+}
+
+/// Typed getters over a GGUF metadata map. Integers are accepted at any stored width (writers
+/// differ: u32, u64 and i32 are all seen); errors name the file and the key.
+#[derive(Debug, Clone, Copy)]
+pub struct Metadata<'a> {
+    path: &'a Path,
+    map: &'a HashMap<String, Value>,
+}
+
+impl<'a> Metadata<'a> {
+    /// A view on `map`, a metadata map read from `path` (named in errors).
+    pub fn new(path: &'a Path, map: &'a HashMap<String, Value>) -> Self {
+        Metadata { path, map }
+    }
+
+    pub fn path(&self) -> &'a Path {
+        self.path
+    }
+
     /// The raw value of `key`, if present.
-    pub fn value(&self, key: &str) -> Option<&Value> {
-        self.content.metadata.get(key)
+    pub fn value(&self, key: &str) -> Option<&'a Value> {
+        self.map.get(key)
     }
 
     fn missing(&self, key: &str) -> LlmError {
         LlmError::Metadata {
-            path: self.path.clone(),
+            path: self.path.to_path_buf(),
             key: key.into(),
             detail: "missing".into(),
         }
@@ -195,13 +223,13 @@ impl GgufFile {
 
     fn malformed(&self, key: &str, want: &str, found: &Value) -> LlmError {
         LlmError::Metadata {
-            path: self.path.clone(),
+            path: self.path.to_path_buf(),
             key: key.into(),
             detail: format!("expected {want}, found {}", describe(found)),
         }
     }
 
-    fn get(&self, key: &str) -> Result<&Value> {
+    fn get(&self, key: &str) -> Result<&'a Value> {
         self.value(key).ok_or_else(|| self.missing(key))
     }
 
@@ -214,7 +242,7 @@ impl GgufFile {
     pub fn get_u32(&self, key: &str) -> Result<u32> {
         let n = self.get_u64(key)?;
         u32::try_from(n).map_err(|_| LlmError::Metadata {
-            path: self.path.clone(),
+            path: self.path.to_path_buf(),
             key: key.into(),
             detail: format!("{n} does not fit in 32 bits"),
         })
@@ -241,7 +269,7 @@ impl GgufFile {
         }
     }
 
-    pub fn get_str(&self, key: &str) -> Result<&str> {
+    pub fn get_str(&self, key: &str) -> Result<&'a str> {
         match self.get(key)? {
             Value::String(s) => Ok(s.as_str()),
             other => Err(self.malformed(key, "a string", other)),
@@ -249,7 +277,7 @@ impl GgufFile {
     }
 
     /// An array of strings (`tokenizer.ggml.tokens`, `tokenizer.ggml.merges`).
-    pub fn get_str_array(&self, key: &str) -> Result<Vec<&str>> {
+    pub fn get_str_array(&self, key: &str) -> Result<Vec<&'a str>> {
         let v = self.get(key)?;
         let Value::Array(items) = v else {
             return Err(self.malformed(key, "an array of strings", v));
@@ -293,7 +321,7 @@ impl GgufFile {
         self.value(key).map(|_| self.get_bool(key)).transpose()
     }
 
-    pub fn opt_str(&self, key: &str) -> Result<Option<&str>> {
+    pub fn opt_str(&self, key: &str) -> Result<Option<&'a str>> {
         self.value(key).map(|_| self.get_str(key)).transpose()
     }
 }
@@ -470,22 +498,42 @@ mod tests {
             let g = GgufFile::open(&p).unwrap();
             assert_eq!(g.arch(), spec.arch);
             assert_eq!(
-                g.get_usize(&g.arch_key("block_count")).unwrap(),
+                g.metadata().get_usize(&g.arch_key("block_count")).unwrap(),
                 spec.n_layer
             );
-            assert_eq!(g.get_usize(&g.arch_key("embedding_length")).unwrap(), 64);
-            assert!((g.get_f32(&g.arch_key("rope.freq_base")).unwrap() - 10_000.0).abs() < 1e-3);
-            assert_eq!(g.get_str("tokenizer.ggml.model").unwrap(), "gpt2");
             assert_eq!(
-                g.get_str_array("tokenizer.ggml.tokens").unwrap().len(),
+                g.metadata()
+                    .get_usize(&g.arch_key("embedding_length"))
+                    .unwrap(),
+                64
+            );
+            assert!(
+                (g.metadata().get_f32(&g.arch_key("rope.freq_base")).unwrap() - 10_000.0).abs()
+                    < 1e-3
+            );
+            assert_eq!(
+                g.metadata().get_str("tokenizer.ggml.model").unwrap(),
+                "gpt2"
+            );
+            assert_eq!(
+                g.metadata()
+                    .get_str_array("tokenizer.ggml.tokens")
+                    .unwrap()
+                    .len(),
                 spec.vocab_size()
             );
             assert_eq!(
-                g.get_i64_array("tokenizer.ggml.token_type").unwrap().len(),
+                g.metadata()
+                    .get_i64_array("tokenizer.ggml.token_type")
+                    .unwrap()
+                    .len(),
                 spec.vocab_size()
             );
-            assert!(!g.get_bool("tokenizer.ggml.add_bos_token").unwrap());
-            assert_eq!(g.opt_u32("no.such.key").unwrap(), None);
+            assert!(!g
+                .metadata()
+                .get_bool("tokenizer.ggml.add_bos_token")
+                .unwrap());
+            assert_eq!(g.metadata().opt_u32("no.such.key").unwrap(), None);
             assert_eq!(g.has_tensor("output.weight"), spec.arch == Arch::Qwen2);
             let q = g
                 .tensor(
@@ -503,18 +551,26 @@ mod tests {
         let bytes = tiny_gguf_bytes(&TinySpec::llama()).unwrap();
         let g = GgufFile::from_reader(&mut std::io::Cursor::new(bytes), Path::new("tiny.gguf"))
             .unwrap();
-        let err = g.get_u32("llama.expert_count").unwrap_err();
+        let err = g.metadata().get_u32("llama.expert_count").unwrap_err();
         assert!(
             matches!(&err, LlmError::Metadata { key, .. } if key == "llama.expert_count"),
             "{err}"
         );
-        let msg = g.get_u32("tokenizer.ggml.model").unwrap_err().to_string();
+        let msg = g
+            .metadata()
+            .get_u32("tokenizer.ggml.model")
+            .unwrap_err()
+            .to_string();
         assert!(
             msg.contains("tokenizer.ggml.model") && msg.contains("expected a non-negative integer"),
             "{msg}"
         );
         assert!(msg.contains("tiny.gguf"), "{msg}");
-        let msg = g.get_f32("general.architecture").unwrap_err().to_string();
+        let msg = g
+            .metadata()
+            .get_f32("general.architecture")
+            .unwrap_err()
+            .to_string();
         assert!(
             msg.contains("expected a float") && msg.contains("\"llama\""),
             "{msg}"
@@ -620,7 +676,10 @@ mod tests {
             let Some(p) = real_model(file) else { continue };
             let g = GgufFile::open(&p).unwrap();
             assert_eq!(g.arch(), arch);
-            assert_eq!(g.get_usize(&g.arch_key("block_count")).unwrap(), layers);
+            assert_eq!(
+                g.metadata().get_usize(&g.arch_key("block_count")).unwrap(),
+                layers
+            );
             assert_eq!(g.has_tensor("output.weight"), arch == Arch::Qwen2);
         }
     }
