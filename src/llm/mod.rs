@@ -1,5 +1,6 @@
 //! The local LLM runtime (placeholder: issue 3).
 pub mod error;
 pub mod gguf;
+pub mod tokenizer;
 pub mod tiny;
 pub use error::{LlmError, Result};
