@@ -352,6 +352,7 @@ mod tests {
     use crate::llm::tiny::{tiny_gguf_bytes, TinySpec, TINY_SPECIAL_TOKENS};
     use candle_core::quantized::gguf_file::{Content, Value};
     use std::collections::HashMap;
+    use std::sync::OnceLock;
 
     fn tiny_metadata(arch: Arch) -> HashMap<String, Value> {
         let bytes = tiny_gguf_bytes(&TinySpec::new(arch)).unwrap();
@@ -482,10 +483,39 @@ mod tests {
         assert_eq!(ids, vec![1, tok.token_to_id("WALK").unwrap()]);
     }
 
-    fn real(file: &str) -> Option<GgufTokenizer> {
-        let p = real_model(file)?;
-        let g = GgufFile::open(&p).unwrap();
-        Some(GgufTokenizer::from_gguf(&g).unwrap())
+    /// The real model's tokenizer, built once per test binary (a build reads the whole vocabulary).
+    fn real(file: &'static str) -> Option<&'static GgufTokenizer> {
+        static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
+        cell.get_or_init(|| {
+            let p = real_model(file)?;
+            let g = GgufFile::open(&p).unwrap();
+            Some(GgufTokenizer::from_gguf(&g).unwrap())
+        })
+        .as_ref()
+    }
+
+    /// Reference ids for Qwen2's vocabulary (shared by Qwen2.5), taken from llama.cpp's test
+    /// vectors `models/ggml-vocab-qwen2.gguf.{inp,out}`, whose ids were produced by Hugging Face
+    /// `tokenizers` from Qwen2's tokenizer.json — an implementation independent of this one.
+    #[test]
+    fn qwen_ids_match_reference() {
+        let Some(tok) = real(QWEN) else { return };
+        let cases: &[(&str, &[u32])] = &[
+            ("ied 4 ½ months", &[1122, 220, 19, 220, 26062, 3951]),
+            ("Äpfel", &[86975, 15897, 301]),
+            ("\t\n", &[1572]),
+            (" Hello World", &[21927, 4337]),
+            (" Hello, world!", &[21927, 11, 1879, 0]),
+            (" this is 🦙.cpp", &[419, 374, 11162, 99, 247, 13, 10821]),
+            ("    Hello\n    Hello", &[262, 21927, 198, 262, 21927]),
+            ("\n =", &[198, 284]),
+            ("33333", &[18, 18, 18, 18, 18]),
+        ];
+        for (text, want) in cases {
+            assert_eq!(tok.encode(text).unwrap(), *want, "{text:?}");
+        }
     }
 
     #[test]
@@ -520,5 +550,49 @@ mod tests {
             assert_eq!(tok.eos_ids(), eos.as_slice(), "{file}");
             assert!(!tok.add_bos());
         }
+    }
+
+    /// One-off check against llama.cpp's tokenizer test vectors (`models/ggml-vocab-*.gguf` with
+    /// `.inp` texts and `.out` ids, the ids produced by Hugging Face `tokenizers` from each model's
+    /// tokenizer.json). Not run by default: those files are not ours to ship. Run with
+    /// `STEP_VOCAB_TESTS_DIR=<llama.cpp>/models cargo test --lib vocab_test_vectors -- --ignored`.
+    #[test]
+    #[ignore]
+    fn vocab_test_vectors() {
+        let Ok(dir) = std::env::var("STEP_VOCAB_TESTS_DIR") else {
+            panic!("set STEP_VOCAB_TESTS_DIR to llama.cpp's models/ folder");
+        };
+        let dir = std::path::PathBuf::from(dir);
+        let mut failures = Vec::new();
+        for name in ["qwen2", "starcoder", "gpt-2"] {
+            let gguf = dir.join(format!("ggml-vocab-{name}.gguf"));
+            let inp = std::fs::read_to_string(gguf.with_extension("gguf.inp")).unwrap();
+            let out = std::fs::read_to_string(gguf.with_extension("gguf.out")).unwrap();
+            let mut f = std::io::BufReader::new(std::fs::File::open(&gguf).unwrap());
+            let content = Content::read(&mut f).unwrap();
+            let tok =
+                GgufTokenizer::from_metadata(Metadata::new(&gguf, &content.metadata)).unwrap();
+            let texts: Vec<&str> = inp.split("\n__ggml_vocab_test__\n").collect();
+            let outs: Vec<&str> = out.lines().collect();
+            let mut ok = 0;
+            for (text, want) in texts.iter().zip(&outs) {
+                let want: Vec<u32> = want
+                    .split_whitespace()
+                    .map(|x| x.parse().unwrap())
+                    .collect();
+                let got = tok.encode(text).unwrap();
+                if got == want {
+                    ok += 1;
+                } else {
+                    failures.push(format!("{name}: {text:?}: want {want:?} got {got:?}"));
+                }
+            }
+            eprintln!(
+                "{name} (pre={}): {ok}/{} test vectors match",
+                tok.pre(),
+                outs.len()
+            );
+        }
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
     }
 }
