@@ -1,4 +1,5 @@
 //! The local LLM runtime (placeholder: issue 3).
+pub mod chat;
 pub mod error;
 pub mod gguf;
 pub mod tokenizer;
