@@ -133,7 +133,7 @@ impl ChatTemplate {
     }
 }
 
-/// "template <name>, line N: <what>" followed by the offending source line.
+/// "<name>, line N: <what>" followed by the offending source line.
 fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
     let what = match e.detail() {
         Some(d) => format!("{}: {d}", e.kind()),
@@ -147,9 +147,9 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
                 .unwrap_or("")
                 .trim();
             let text: String = text.chars().take(120).collect();
-            format!("template {name}, line {line}: {what}\n  {line} | {text}")
+            format!("{name}, line {line}: {what}\n  {line} | {text}")
         }
-        None => format!("template {name}: {what}"),
+        None => format!("{name}: {what}"),
     };
     LlmError::Template(msg)
 }

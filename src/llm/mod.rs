@@ -2,6 +2,7 @@
 pub mod chat;
 pub mod error;
 pub mod gguf;
+pub mod locate;
 pub mod tokenizer;
 pub mod tiny;
 pub use error::{LlmError, Result};
