@@ -34,7 +34,7 @@ pub struct ModelConfig {
 impl ModelConfig {
     /// Reads the configuration; `path` only labels errors.
     pub fn from_gguf(ct: &gguf_file::Content, arch: Arch, path: &std::path::Path) -> Result<Self> {
-        let p = arch.name();
+        let p = arch.gguf_name();
         let key = |k: &str| format!("{p}.{k}");
         let get_u32 = |k: &str| -> Result<usize> {
             let full = key(k);
