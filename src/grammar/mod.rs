@@ -1,1 +1,18 @@
-//! (placeholder: filled in by its issue)
+//! Lark grammars for the planner, built from data — the embodiment's verbs and the scene's objects —
+//! never written by hand per task, so a grammar-constrained model can only write actions that exist,
+//! with the right number of objects, naming objects that are in the scene.
+//!
+//! [`ActionGrammar`] describes the one family of outputs the planner asks for (header fields such as a
+//! verdict or a reason, then 1..=N lines that are actions in VirtualHome script form or free-text
+//! subgoals) and renders it as Lark for llguidance ([`ActionGrammar::to_lark`]). Its
+//! [`ActionGrammar::parse`] is the independent checker for the same family: plain string code that
+//! shares nothing with llguidance, so tests can prove that constrained outputs are what the spec says.
+
+mod actions;
+mod lark;
+
+pub use actions::{
+    parse_action_line, parse_actions, ActionGrammar, Field, FieldKind, GrammarError, ParseError,
+    Parsed, PlanLine, VerbSpec, MAX_LINES, MAX_TEXT_CHARS, TEXT_CHARS,
+};
+pub use lark::lark_string;

@@ -1,5 +1,6 @@
 //! The local LLM runtime (in progress: issue 3).
 pub mod chat;
+pub mod constraint;
 pub mod error;
 pub mod gguf;
 pub mod locate;

@@ -1,0 +1,349 @@
+//! Grammar-constrained decoding: a Lark grammar becomes, at every step of generation, the set of token
+//! ids the model may choose next (applied to the logits before sampling), plus the tokens the grammar
+//! forces outright (appended without a choice). Built on llguidance.
+//!
+//! [`GrammarCompiler`] is made once per tokenizer; it compiles a grammar text once and caches it, and
+//! every [`GrammarCompiler::compile`] hands out a fresh [`Constraint`] (a clone of the compiled
+//! parser). A grammar that cannot be satisfied is an error, never an empty mask that would hang the
+//! decode loop, and nothing on this path panics on bad input.
+//!
+//! The decode loop drives a [`Constraint`] like this:
+//! ```text
+//! loop {
+//!     if c.is_finished() { break }                 // nothing can follow: stop (EOS is implied)
+//!     let ff = c.forced_tokens()?;                 // already committed: append, prefill in one pass
+//!     if !ff.is_empty() { append(ff); continue }
+//!     let mask = c.mask()?;                        // EOS is in it only where the grammar can end
+//!     mask.apply_to_logits(&mut logits)?;
+//!     let t = sample(&logits);
+//!     if eos.contains(&t) { break }                // (committing it is allowed but not needed)
+//!     c.commit(t)?;
+//! }
+//! ```
+
+use std::collections::{HashMap, VecDeque};
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use llguidance::api::TopLevelGrammar;
+use llguidance::toktrie::{SimpleVob, TokEnv};
+use llguidance::{Matcher, ParserFactory, TokenParser};
+use toktrie_hf_tokenizers::ByteTokenizer;
+
+use super::{LlmError, Result};
+
+/// How many compiled grammars the compiler keeps (the oldest is dropped first). The planner builds
+/// grammars per scene and decision; this bounds memory while keeping the hot ones.
+const CACHE_CAPACITY: usize = 128;
+
+/// The set of token ids allowed at one position (its length is the model's logits width).
+#[derive(Clone, Debug)]
+pub struct TokenMask {
+    vob: SimpleVob,
+}
+
+impl TokenMask {
+    /// Whether token `tok` may be chosen (ids beyond the vocabulary never are).
+    pub fn is_allowed(&self, tok: u32) -> bool {
+        (tok as usize) < self.vob.len() && self.vob.is_allowed(tok)
+    }
+
+    /// How many tokens are allowed.
+    pub fn count(&self) -> usize {
+        self.vob.num_set()
+    }
+
+    /// The allowed token ids, ascending.
+    pub fn iter(&self) -> impl Iterator<Item = u32> + '_ {
+        self.vob.iter()
+    }
+
+    /// The logits width this mask is for.
+    pub fn len(&self) -> usize {
+        self.vob.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.vob.is_zero()
+    }
+
+    /// Sets every disallowed logit to `-inf`, leaving the allowed ones untouched. Works a 32-bit word
+    /// of the mask at a time, so a mostly-empty or mostly-full mask costs little more than a memset.
+    pub fn apply_to_logits(&self, logits: &mut [f32]) -> Result<()> {
+        if logits.len() != self.vob.len() {
+            return Err(LlmError::Decode(format!(
+                "logits have {} entries but the grammar's vocabulary has {}; build the GrammarCompiler with the model's logits width",
+                logits.len(),
+                self.vob.len()
+            )));
+        }
+        for (chunk, &word) in logits.chunks_mut(32).zip(self.vob.as_slice()) {
+            match word {
+                u32::MAX => {}
+                0 => chunk.fill(f32::NEG_INFINITY),
+                w => {
+                    for (bit, x) in chunk.iter_mut().enumerate() {
+                        if (w >> bit) & 1 == 0 {
+                            *x = f32::NEG_INFINITY;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Compiles Lark grammars against one tokenizer and caches them by grammar text.
+pub struct GrammarCompiler {
+    factory: ParserFactory,
+    eos: Vec<u32>,
+    n_vocab: usize,
+    cache: Mutex<Cache>,
+    compiles: AtomicUsize,
+    hits: AtomicUsize,
+}
+
+#[derive(Default)]
+struct Cache {
+    parsers: HashMap<String, TokenParser>,
+    order: VecDeque<String>,
+}
+
+impl GrammarCompiler {
+    /// `n_vocab` is the model's logits width (it may exceed the tokenizer's vocabulary: the extra ids
+    /// are never allowed); `eos` the ids that end a generation, allowed only where the grammar can end.
+    pub fn new(tokenizer: &tokenizers::Tokenizer, n_vocab: usize, eos: &[u32]) -> Result<Self> {
+        let vocab = tokenizer.get_vocab_size(true);
+        if vocab == 0 {
+            return Err(LlmError::Tokenizer("the tokenizer has an empty vocabulary".into()));
+        }
+        if n_vocab < vocab {
+            return Err(LlmError::Tokenizer(format!(
+                "the model's logits width {n_vocab} is smaller than the tokenizer's vocabulary {vocab}; tokenizer and model do not match"
+            )));
+        }
+        if eos.is_empty() {
+            return Err(LlmError::Tokenizer("no end-of-sequence token given; constrained decoding needs at least one".into()));
+        }
+        if let Some(&bad) = eos.iter().find(|&&t| t as usize >= vocab) {
+            return Err(LlmError::Tokenizer(format!(
+                "end-of-sequence token {bad} is outside the tokenizer's vocabulary ({vocab} tokens)"
+            )));
+        }
+        // toktrie_hf_tokenizers asserts on a few malformed vocabularies; turn that into an error.
+        let tok_env: TokEnv = std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
+            let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
+            bt.set_eos_tokens(eos);
+            bt.into_tok_env(Some(n_vocab))
+        }))
+        .map_err(|_| LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into()))?
+        .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
+        let mut factory = ParserFactory::new_simple(&tok_env)
+            .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
+        factory.quiet();
+        Ok(Self {
+            factory,
+            eos: eos.to_vec(),
+            n_vocab,
+            cache: Mutex::new(Cache::default()),
+            compiles: AtomicUsize::new(0),
+            hits: AtomicUsize::new(0),
+        })
+    }
+
+    /// A fresh constraint for `lark` (llguidance's Lark dialect). The grammar is compiled the first
+    /// time its text is seen and cloned from the cache afterwards. A syntax error names the line and
+    /// column; a grammar no token sequence can start is rejected here.
+    pub fn compile(&self, lark: &str) -> Result<Constraint> {
+        if let Some(p) = self.lock().parsers.get(lark) {
+            self.hits.fetch_add(1, Ordering::Relaxed);
+            return Ok(self.constraint(p.clone()));
+        }
+        let parser = self
+            .factory
+            .create_parser(TopLevelGrammar::from_lark(lark.to_string()))
+            .map_err(|e| LlmError::Grammar(describe_compile_error(&e.to_string())))?;
+        self.compiles.fetch_add(1, Ordering::Relaxed);
+        // A grammar whose language no token of this vocabulary can begin would give an empty first
+        // mask: reject it now, with the reason, rather than in the middle of a generation.
+        let mut probe = Matcher::new(Ok(parser.clone()));
+        if let Err(e) = probe.compute_mask() {
+            return Err(LlmError::Grammar(format!(
+                "grammar cannot be satisfied: no token sequence of this vocabulary can produce it ({e})"
+            )));
+        }
+        let mut cache = self.lock();
+        if !cache.parsers.contains_key(lark) {
+            if cache.order.len() >= CACHE_CAPACITY {
+                if let Some(old) = cache.order.pop_front() {
+                    cache.parsers.remove(&old);
+                }
+            }
+            cache.order.push_back(lark.to_string());
+            cache.parsers.insert(lark.to_string(), parser.clone());
+        }
+        Ok(self.constraint(parser))
+    }
+
+    /// How many grammars were compiled (cache misses) and how many were served from the cache.
+    pub fn cache_stats(&self) -> (usize, usize) {
+        (self.compiles.load(Ordering::Relaxed), self.hits.load(Ordering::Relaxed))
+    }
+
+    /// The EOS ids this compiler was built with.
+    pub fn eos(&self) -> &[u32] {
+        &self.eos
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Cache> {
+        // A panic while holding the lock cannot leave the map half-updated in a harmful way.
+        self.cache.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn constraint(&self, parser: TokenParser) -> Constraint {
+        Constraint {
+            matcher: Matcher::new(Ok(parser)),
+            env: self.factory.tok_env().clone(),
+            eos: self.eos.clone(),
+            n_vocab: self.n_vocab,
+            mask: None,
+            tokens: Vec::new(),
+        }
+    }
+}
+
+/// llguidance reports Lark errors as `LINE(COL): message …` or `at LINE(COL): message …`; say it in
+/// words.
+fn describe_compile_error(msg: &str) -> String {
+    let parsed = msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
+        let (line, col) = pos.split_once('(')?;
+        Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
+    });
+    match parsed {
+        Some((line, col, rest)) => format!("invalid Lark grammar at line {line}, column {col}: {rest}"),
+        None => format!("invalid Lark grammar: {msg}"),
+    }
+}
+
+/// One generation's grammar state: which tokens may come next, and which are forced.
+pub struct Constraint {
+    matcher: Matcher,
+    env: TokEnv,
+    eos: Vec<u32>,
+    n_vocab: usize,
+    /// The mask of the current position, once computed (commit checks against it).
+    mask: Option<TokenMask>,
+    /// Tokens committed so far (forced ones included), for error messages.
+    tokens: Vec<u32>,
+}
+
+impl Constraint {
+    /// The tokens allowed at the next position. EOS ids are in it only where the grammar can end;
+    /// once [`Self::is_finished`], only EOS is. A position where nothing is allowed is an error.
+    pub fn mask(&mut self) -> Result<TokenMask> {
+        if let Some(m) = &self.mask {
+            return Ok(m.clone());
+        }
+        let vob = if self.is_finished() {
+            let mut v = SimpleVob::alloc(self.n_vocab);
+            for &e in &self.eos {
+                v.allow_token(e);
+            }
+            v
+        } else {
+            self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
+        };
+        if vob.is_zero() {
+            // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
+            return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
+        }
+        let m = TokenMask { vob };
+        self.mask = Some(m.clone());
+        Ok(m)
+    }
+
+    /// Advances past `token`, which must be in the current mask. After the grammar has finished,
+    /// committing an EOS id is a no-op and anything else is an error.
+    pub fn commit(&mut self, token: u32) -> Result<()> {
+        if token as usize >= self.n_vocab {
+            return Err(LlmError::Decode(format!("token {token} is outside the vocabulary ({} ids)", self.n_vocab)));
+        }
+        if self.is_finished() {
+            if self.eos.contains(&token) {
+                return Ok(());
+            }
+            return Err(LlmError::Decode(format!(
+                "the grammar is complete; only end-of-sequence may follow, got token {token} {}",
+                self.token_dbg(token)
+            )));
+        }
+        if !self.mask()?.is_allowed(token) {
+            return Err(LlmError::Decode(format!(
+                "token {token} {} is not allowed by the grammar after {:?}",
+                self.token_dbg(token),
+                self.text_tail()
+            )));
+        }
+        self.matcher.consume_token(token).map_err(|e| self.error("cannot commit a token", e))?;
+        self.mask = None;
+        self.tokens.push(token);
+        Ok(())
+    }
+
+    /// The tokens the grammar forces from here (possibly none), already committed: the caller
+    /// appends them to the sequence without a choice and must not commit them again.
+    pub fn forced_tokens(&mut self) -> Result<Vec<u32>> {
+        if self.is_finished() {
+            return Ok(Vec::new());
+        }
+        let ff = self.matcher.compute_ff_tokens();
+        if let Some(e) = self.matcher.get_error() {
+            return Err(LlmError::Decode(format!("computing forced tokens: {e}")));
+        }
+        if ff.is_empty() {
+            return Ok(ff);
+        }
+        self.matcher.consume_tokens(&ff).map_err(|e| self.error("cannot commit forced tokens", e))?;
+        self.mask = None;
+        self.tokens.extend_from_slice(&ff);
+        Ok(ff)
+    }
+
+    /// Whether the text so far is a complete sentence of the grammar (EOS would be allowed now).
+    pub fn is_accepting(&mut self) -> bool {
+        self.is_finished() || self.matcher.is_accepting().unwrap_or(false)
+    }
+
+    /// Whether the grammar is complete and nothing more can follow (or EOS was committed).
+    pub fn is_finished(&self) -> bool {
+        self.matcher.is_stopped() && !self.matcher.is_error()
+    }
+
+    /// The tokens committed so far, forced ones included.
+    pub fn tokens(&self) -> &[u32] {
+        &self.tokens
+    }
+
+    fn error(&self, what: &str, e: anyhow::Error) -> LlmError {
+        LlmError::Decode(format!(
+            "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {e}",
+            self.text_tail()
+        ))
+    }
+
+    fn token_dbg(&self, token: u32) -> String {
+        self.env.tok_trie().token_dbg(token)
+    }
+
+    /// The last bytes of the committed text, for error messages.
+    fn text_tail(&self) -> String {
+        let start = self.tokens.len().saturating_sub(16);
+        let bytes = self.env.tok_trie().decode_raw(self.tokens.get(start..).unwrap_or(&[]));
+        String::from_utf8_lossy(&bytes).into_owned()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,498 @@
+//! Tests of the constraint core on small byte-level BPE tokenizers built here, and the "zero grammar
+//! errors" property: random grammars of the planner's family, random-weight "models", every output
+//! parses under the grammar's spec by the independent checker in `crate::grammar`.
+
+use std::sync::OnceLock;
+
+use proptest::prelude::*;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use tokenizers::decoders::byte_level::ByteLevel as ByteLevelDecoder;
+use tokenizers::models::bpe::{BpeTrainerBuilder, BPE};
+use tokenizers::models::TrainerWrapper;
+use tokenizers::pre_tokenizers::byte_level::ByteLevel;
+use tokenizers::{AddedToken, Tokenizer};
+
+use super::*;
+use crate::action::ObjRef;
+use crate::grammar::{ActionGrammar, FieldKind, VerbSpec, TEXT_CHARS};
+
+const EOS: u32 = 2;
+
+/// Corpus for the test tokenizer: script lines and words, so merges look like a real model's
+/// (multi-character tokens spanning brackets, spaces and digits), not one byte per token.
+fn corpus() -> Vec<String> {
+    let verbs = ["WALK", "GRAB", "OPEN", "CLOSE", "PUTIN", "PUTBACK", "SWITCHON", "STANDUP", "FIND", "LOOKAT"];
+    let objs = ["apple", "fridge", "kitchen_counter", "microwave", "cabinet", "table", "plate", "cup"];
+    let mut lines = Vec::new();
+    for (i, v) in verbs.iter().enumerate() {
+        for (j, o) in objs.iter().enumerate() {
+            let id = (i * 37 + j * 11) % 300;
+            lines.push(format!("[{v}] <{o}> ({id})"));
+            lines.push(format!("[{v}] <{o}> ({id}) <{}> ({})", objs[(j + 1) % objs.len()], id + 1));
+        }
+    }
+    for s in [
+        "subgoal: put the apple in the fridge",
+        "verdict: decompose\nreason: the task needs several steps",
+        "verdict: primitive\nreason: it's a single action, done.",
+        "the quick brown fox jumps over the lazy dog 0123456789",
+        "\"quoted\" back\\slash under_score it's",
+    ] {
+        lines.push(s.to_string());
+    }
+    lines
+}
+
+/// A GPT-2-style byte-level BPE tokenizer (all 256 bytes + merges learnt from [`corpus`]) with the
+/// ChatML specials at ids 0..=2 like SmolLM2; EOS is `<|im_end|>` = 2.
+fn build_test_tokenizer() -> Tokenizer {
+    let trainer = BpeTrainerBuilder::new()
+        .vocab_size(700)
+        .min_frequency(2)
+        .show_progress(false)
+        .special_tokens(vec![
+            AddedToken::from("<|endoftext|>", true),
+            AddedToken::from("<|im_start|>", true),
+            AddedToken::from("<|im_end|>", true),
+        ])
+        .initial_alphabet(ByteLevel::alphabet().into_iter().collect())
+        .build();
+    let mut trainer = TrainerWrapper::BpeTrainer(trainer);
+    let mut tok = Tokenizer::new(BPE::default());
+    tok.with_pre_tokenizer(Some(ByteLevel::new(false, true, true)));
+    tok.with_decoder(Some(ByteLevelDecoder::new(false, true, true)));
+    tok.train(&mut trainer, corpus().into_iter()).expect("training the test tokenizer");
+    tok
+}
+
+fn test_tokenizer() -> &'static Tokenizer {
+    static TOK: OnceLock<Tokenizer> = OnceLock::new();
+    TOK.get_or_init(build_test_tokenizer)
+}
+
+fn compiler() -> &'static GrammarCompiler {
+    static C: OnceLock<GrammarCompiler> = OnceLock::new();
+    C.get_or_init(|| {
+        let tok = test_tokenizer();
+        // Pad the logits width past the vocabulary, as real models do.
+        GrammarCompiler::new(tok, tok.get_vocab_size(true) + 5, &[EOS]).expect("test compiler")
+    })
+}
+
+fn decode(tokens: &[u32]) -> String {
+    test_tokenizer().decode(tokens, false).expect("decode")
+}
+
+#[test]
+fn test_tokenizer_is_deterministic_and_byte_level() {
+    let a = build_test_tokenizer();
+    let b = test_tokenizer();
+    assert_eq!(a.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>(),
+               b.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>());
+    assert_eq!(b.token_to_id("<|im_end|>"), Some(EOS));
+    let ids = b.encode("[GRAB] <apple> (12)", false).unwrap().get_ids().to_vec();
+    assert!(ids.len() < "[GRAB] <apple> (12)".len(), "merges are learnt: {ids:?}");
+    assert_eq!(decode(&ids), "[GRAB] <apple> (12)");
+}
+
+/// How a walk ended.
+#[derive(Debug, PartialEq)]
+enum End {
+    Eos,
+    Finished,
+}
+
+/// The decode loop with a random-weight "model": random logits per step from a seeded RNG, the mask
+/// applied, a token sampled by softmax; forced tokens taken when offered (on a coin flip, so both
+/// paths are exercised). Checks at every step that EOS is allowed exactly when `accepts(text)`.
+fn random_walk(
+    c: &mut Constraint,
+    rng: &mut StdRng,
+    n_vocab: usize,
+    cap: usize,
+    accepts: &dyn Fn(&str) -> bool,
+) -> Result<(Vec<u32>, End), String> {
+    let mut out: Vec<u32> = Vec::new();
+    let mut logits = vec![0f32; n_vocab];
+    while out.len() < cap {
+        if c.is_finished() {
+            let m = c.mask().map_err(|e| e.to_string())?;
+            if m.iter().collect::<Vec<_>>() != vec![EOS] {
+                return Err("after the end only EOS may be allowed".into());
+            }
+            return Ok((out, End::Finished));
+        }
+        if rng.random_bool(0.5) {
+            let ff = c.forced_tokens().map_err(|e| e.to_string())?;
+            if !ff.is_empty() {
+                out.extend_from_slice(&ff);
+                continue;
+            }
+        }
+        let mask = c.mask().map_err(|e| e.to_string())?;
+        let text = decode(&out);
+        if mask.is_allowed(EOS) != accepts(&text) {
+            return Err(format!("EOS allowed = {} but the checker says {} for {text:?}", mask.is_allowed(EOS), accepts(&text)));
+        }
+        if mask.is_allowed(EOS) != c.is_accepting() {
+            return Err(format!("is_accepting disagrees with the mask at {text:?}"));
+        }
+        for x in logits.iter_mut() {
+            *x = rng.random_range(-4.0f32..4.0);
+        }
+        mask.apply_to_logits(&mut logits).map_err(|e| e.to_string())?;
+        let max = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+        let weights: Vec<f32> = logits.iter().map(|&l| (l - max).exp()).collect();
+        let total: f32 = weights.iter().sum();
+        let mut r = rng.random_range(0.0..total);
+        let mut pick = None;
+        for (i, &w) in weights.iter().enumerate() {
+            if w > 0.0 {
+                pick = Some(i as u32);
+                if r < w {
+                    break;
+                }
+                r -= w;
+            }
+        }
+        let t = pick.ok_or("no token with positive weight")?;
+        if !mask.is_allowed(t) {
+            return Err(format!("sampled token {t} outside the mask"));
+        }
+        if t == EOS {
+            return Ok((out, End::Eos));
+        }
+        c.commit(t).map_err(|e| e.to_string())?;
+        out.push(t);
+    }
+    Err(format!("no end after {cap} tokens: {:?}", decode(&out)))
+}
+
+#[test]
+fn cache_compiles_once_and_hands_out_independent_constraints() {
+    let tok = test_tokenizer();
+    let c = GrammarCompiler::new(tok, tok.get_vocab_size(true), &[EOS]).unwrap();
+    let g = r#"start: "[WALK] " ("<apple> (1)" | "<fridge> (2)")"#;
+    let mut a = c.compile(g).unwrap();
+    assert_eq!(c.cache_stats(), (1, 0));
+    let mut b = c.compile(g).unwrap();
+    assert_eq!(c.cache_stats(), (1, 1), "the second compile of the same text is a cache hit");
+    c.compile(&format!("{g}\n")).unwrap();
+    assert_eq!(c.cache_stats(), (2, 1), "a different text compiles");
+
+    // Advancing one constraint leaves the other at the start.
+    let ff = a.forced_tokens().unwrap();
+    assert!(decode(&ff).starts_with("[WALK]"), "{:?}", decode(&ff));
+    assert!(b.tokens().is_empty());
+    let mb = b.mask().unwrap();
+    let first = decode(&[mb.iter().next().unwrap()]);
+    assert!("[WALK] ".starts_with(&first), "{first:?}");
+}
+
+#[test]
+fn syntax_errors_name_the_line_and_the_problem() {
+    let c = compiler();
+    let e = c.compile("start: a\na: \"x\" (\n").err().unwrap().to_string();
+    assert!(e.starts_with("grammar: invalid Lark grammar at line 2, column 9: Expected token ')'"), "{e}");
+    let e = c.compile("start: \"a\" | b\n\nb: undefined_rule\n").err().unwrap().to_string();
+    assert!(e.starts_with("grammar: invalid Lark grammar at line 3, column 4: unknown name: \"undefined_rule\""), "{e}");
+    let e = c.compile("notstart: \"a\"").err().unwrap().to_string();
+    assert!(e.contains("grammar: invalid Lark grammar: no start rule found"), "{e}");
+    let e = c.compile("start: /[abc/").err().unwrap().to_string();
+    assert!(e.starts_with("grammar: invalid Lark grammar at line 1, column 8: invalid regex"), "{e}");
+}
+
+#[test]
+fn an_empty_language_is_rejected_at_compile_time() {
+    let e = compiler().compile("start: start \"a\"").err().unwrap().to_string();
+    assert!(e.starts_with("grammar:"), "{e}");
+}
+
+/// A vocabulary without 'z': a grammar needing 'z' first is rejected when compiled, one needing it
+/// later fails at that position with a clear error (never an empty mask, a hang or a panic).
+#[test]
+fn grammars_this_vocabulary_cannot_produce_are_errors() {
+    let json = r#"{
+        "version": "1.0", "truncation": null, "padding": null, "normalizer": null, "post_processor": null,
+        "added_tokens": [{"id": 2, "content": "<|im_end|>", "single_word": false, "lstrip": false,
+                          "rstrip": false, "normalized": false, "special": true}],
+        "pre_tokenizer": {"type": "ByteLevel", "add_prefix_space": false, "trim_offsets": true, "use_regex": true},
+        "decoder": {"type": "ByteLevel", "add_prefix_space": false, "trim_offsets": true, "use_regex": true},
+        "model": {"type": "BPE", "dropout": null, "unk_token": null, "continuing_subword_prefix": null,
+                  "end_of_word_suffix": null, "fuse_unk": false, "byte_fallback": false,
+                  "vocab": {"a": 0, "b": 1, "<|im_end|>": 2}, "merges": []}
+    }"#;
+    let tok: Tokenizer = json.parse().unwrap();
+    let c = GrammarCompiler::new(&tok, 3, &[2]).unwrap();
+
+    let e = c.compile(r#"start: "z""#).err().unwrap().to_string();
+    assert!(e.contains("cannot be satisfied"), "{e}");
+
+    let mut k = c.compile(r#"start: "ab" "z""#).unwrap();
+    let mut err = None;
+    for _ in 0..10 {
+        if let Err(e) = k.forced_tokens() {
+            err = Some(e);
+            break;
+        }
+        match k.mask() {
+            Ok(m) => {
+                let t = m.iter().next().unwrap();
+                k.commit(t).unwrap();
+            }
+            Err(e) => {
+                err = Some(e);
+                break;
+            }
+        }
+    }
+    let e = err.expect("the dead end is reported").to_string();
+    assert!(e.starts_with("decoding:") && e.contains("\"ab\""), "{e}");
+}
+
+#[test]
+fn commit_rejects_tokens_outside_the_mask_and_stays_usable() {
+    let mut k = compiler().compile(r#"start: "[WALK] <apple> (1)" | "[WALK] <apple> (2)" "#).unwrap();
+    let ff = k.forced_tokens().unwrap();
+    assert!(!ff.is_empty());
+    let m = k.mask().unwrap();
+    let bad = (0..m.len() as u32).find(|&t| !m.is_allowed(t)).unwrap();
+    let e = k.commit(bad).unwrap_err().to_string();
+    assert!(e.contains("not allowed by the grammar"), "{e}");
+    let e = k.commit(1_000_000).unwrap_err().to_string();
+    assert!(e.contains("outside the vocabulary"), "{e}");
+    assert!(!m.is_allowed(EOS), "EOS only where the grammar can end");
+    // Still usable: finish the sentence.
+    let mut rng = StdRng::seed_from_u64(1);
+    let n = m.len();
+    let (rest, _) = random_walk(&mut k, &mut rng, n, 100, &|t: &str| t.ends_with(')')).unwrap();
+    let all: Vec<u32> = ff.iter().chain(&rest).copied().collect();
+    let text = decode(&all);
+    assert!(text == "[WALK] <apple> (1)" || text == "[WALK] <apple> (2)", "{text:?}");
+}
+
+#[test]
+fn finished_constraint_allows_only_eos() {
+    let mut k = compiler().compile(r#"start: "ab""#).unwrap();
+    let mut steps = 0;
+    while !k.is_finished() && steps < 10 {
+        steps += 1;
+        if k.forced_tokens().unwrap().is_empty() {
+            let t = k.mask().unwrap().iter().find(|&t| t != EOS).unwrap();
+            k.commit(t).unwrap();
+        }
+    }
+    assert!(k.is_finished() && k.is_accepting());
+    assert_eq!(decode(k.tokens()), "ab");
+    assert_eq!(k.mask().unwrap().iter().collect::<Vec<_>>(), vec![EOS]);
+    assert!(k.forced_tokens().unwrap().is_empty());
+    k.commit(EOS).unwrap();
+    assert!(k.commit(5).unwrap_err().to_string().contains("only end-of-sequence"));
+}
+
+#[test]
+fn eos_commit_ends_an_open_grammar() {
+    let mut k = compiler().compile(r#"start: "a"+"#).unwrap();
+    let a = test_tokenizer().token_to_id("a").unwrap();
+    assert!(!k.mask().unwrap().is_allowed(EOS));
+    k.commit(a).unwrap();
+    assert!(k.is_accepting() && !k.is_finished());
+    k.commit(EOS).unwrap();
+    assert!(k.is_finished());
+}
+
+#[test]
+fn apply_to_logits_masks_exactly_the_disallowed() {
+    let mut k = compiler().compile(r#"start: /[a-m ]{1,5}/"#).unwrap();
+    let m = k.mask().unwrap();
+    assert!(m.count() > 10 && m.count() < m.len() / 2, "{}", m.count());
+    let mut logits: Vec<f32> = (0..m.len()).map(|i| i as f32).collect();
+    m.apply_to_logits(&mut logits).unwrap();
+    for (i, &l) in logits.iter().enumerate() {
+        if m.is_allowed(i as u32) {
+            assert_eq!(l, i as f32);
+        } else {
+            assert_eq!(l, f32::NEG_INFINITY, "token {i}");
+        }
+    }
+    assert_eq!(m.iter().count(), m.count());
+    let e = m.apply_to_logits(&mut [0.0; 3]).unwrap_err().to_string();
+    assert!(e.contains("logits have 3 entries"), "{e}");
+}
+
+#[test]
+fn padded_logits_width_and_bad_eos_are_handled() {
+    let tok = test_tokenizer();
+    let v = tok.get_vocab_size(true);
+    let c = compiler();
+    let mut k = c.compile(r#"start: /[a-z]{1,3}/"#).unwrap();
+    let m = k.mask().unwrap();
+    assert_eq!(m.len(), v + 5);
+    assert!((v as u32..(v + 5) as u32).all(|t| !m.is_allowed(t)), "padding ids are never allowed");
+    assert!(GrammarCompiler::new(tok, v - 1, &[EOS]).err().unwrap().to_string().contains("smaller than"));
+    assert!(GrammarCompiler::new(tok, v, &[]).err().unwrap().to_string().contains("no end-of-sequence"));
+    assert!(GrammarCompiler::new(tok, v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The "zero grammar errors" property.
+
+/// Awkward but legal names: quotes, backslashes, digits, underscores, dots, spaces.
+fn name_strategy(chars: &'static str, max: usize) -> impl Strategy<Value = String> {
+    let cs: Vec<char> = chars.chars().collect();
+    prop::collection::vec(prop::sample::select(cs), 1..=max).prop_map(|v| v.into_iter().collect())
+}
+
+fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
+    let objects = prop::collection::vec(
+        (
+            prop_oneof![
+                3 => name_strategy("abcdefghij_0123456789", 8),
+                1 => name_strategy("ab_\"'\\. 9", 6),
+            ],
+            prop_oneof![0u32..20, 0u32..3000],
+        ),
+        1..6,
+    );
+    let verbs = prop::collection::vec(
+        (name_strategy("ABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789", 8), 0usize..=2, any::<bool>(), any::<u64>()),
+        1..6,
+    );
+    let field = prop_oneof![
+        (1usize..24).prop_map(|k| FieldKind::Text { max_chars: k }),
+        prop::collection::vec(name_strategy("yesnoab", 4), 1..4).prop_map(FieldKind::Choice),
+    ];
+    let header = prop::collection::vec(field, 0..3);
+    let subgoal = prop::option::of(1usize..30);
+    (objects, verbs, header, subgoal, 0usize..3, 0usize..5).prop_map(|(objects, verbs, header, subgoal, min, extra)| {
+        let objects: Vec<ObjRef> = objects.into_iter().map(|(n, id)| ObjRef::new(n, id)).collect();
+        let mut specs: Vec<VerbSpec> = Vec::new();
+        for (i, (name, arity, restrict, bits)) in verbs.into_iter().enumerate() {
+            // Unique names: the index makes them distinct.
+            let mut v = VerbSpec::new(format!("{name}{i}"), arity);
+            // Restrict some verbs (not the first, so a line can always be written) to a subset.
+            if restrict && i > 0 {
+                let slots = (0..arity)
+                    .map(|s| {
+                        objects
+                            .iter()
+                            .enumerate()
+                            .filter(|(j, _)| (bits >> ((s * 13 + j) % 64)) & 1 == 1)
+                            .map(|(_, o)| o.clone())
+                            .collect()
+                    })
+                    .collect();
+                v = v.restricted(slots);
+            }
+            specs.push(v);
+        }
+        let mut g = ActionGrammar::new(specs, objects);
+        for (i, f) in header.into_iter().enumerate() {
+            g.header.push(crate::grammar::Field { label: format!("field {i}"), kind: f });
+        }
+        if let Some(k) = subgoal {
+            g = g.subgoals("subgoal", k);
+        }
+        let min = if g.header.is_empty() { min.max(1) } else { min };
+        g.lines(min, (min + extra).max(1))
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Zero grammar errors: whatever a random model samples under the mask is a sentence of the
+    /// grammar's spec (by the independent checker), EOS is allowed exactly where the checker accepts,
+    /// and every walk ends (finite language, so no hang).
+    #[test]
+    fn random_models_only_write_sentences_of_the_spec(spec in spec_strategy(), seed in any::<u64>()) {
+        let lark = spec.to_lark().map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let c = compiler();
+        let n_vocab = test_tokenizer().get_vocab_size(true) + 5;
+        let accepts = |t: &str| spec.parse(t).is_ok();
+        for w in 0..3u64 {
+            let mut k = c.compile(&lark).map_err(|e| TestCaseError::fail(format!("{e}\n{lark}")))?;
+            let mut rng = StdRng::seed_from_u64(seed ^ w.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let (tokens, _end) = random_walk(&mut k, &mut rng, n_vocab, 4000, &accepts)
+                .map_err(|e| TestCaseError::fail(format!("{e}\n{lark}")))?;
+            let text = decode(&tokens);
+            let parsed = spec.parse(&text);
+            prop_assert!(parsed.is_ok(), "output {:?} rejected: {:?}\n{}", text, parsed.err(), lark);
+        }
+    }
+
+    /// The converse: the mask never cuts off a sentence of the spec. A sentence drawn from the spec
+    /// (by our own generator) is reached by choosing, at every step, an allowed token that matches it.
+    #[test]
+    fn every_sentence_of_the_spec_is_reachable(spec in spec_strategy(), seed in any::<u64>()) {
+        let lark = spec.to_lark().map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let mut rng = StdRng::seed_from_u64(seed);
+        let target = sample_sentence(&spec, &mut rng);
+        prop_assert!(spec.parse(&target).is_ok(), "generator wrote {:?}", target);
+        let mut k = compiler().compile(&lark).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let mut done: Vec<u32> = Vec::new();
+        for _ in 0..4000 {
+            let so_far = decode(&done);
+            let rest = target.strip_prefix(so_far.as_str())
+                .ok_or_else(|| TestCaseError::fail(format!("{so_far:?} left the target {target:?}")))?;
+            if rest.is_empty() && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false)) {
+                return Ok(());
+            }
+            if rng.random_bool(0.5) {
+                let ff = k.forced_tokens().map_err(|e| TestCaseError::fail(e.to_string()))?;
+                if !ff.is_empty() { done.extend(ff); continue; }
+            }
+            let m = k.mask().map_err(|e| TestCaseError::fail(format!("{e} at {so_far:?} towards {target:?}\n{lark}")))?;
+            let fits: Vec<u32> = m.iter().filter(|&t| t != EOS).filter(|&t| {
+                let s = decode(&[t]);
+                !s.is_empty() && rest.starts_with(&s)
+            }).collect();
+            prop_assert!(!fits.is_empty(), "no allowed token continues {:?} towards {:?}\n{}", so_far, target, lark);
+            let t = fits[rng.random_range(0..fits.len())];
+            k.commit(t).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            done.push(t);
+        }
+        prop_assert!(false, "did not reach {:?}", target);
+    }
+}
+
+/// A random sentence of the spec, written from the spec directly (not from the Lark text).
+fn sample_sentence(spec: &ActionGrammar, rng: &mut StdRng) -> String {
+    let text_chars: Vec<char> = ('a'..='z').chain('A'..='Z').chain('0'..='9').chain(" ,.'_-".chars()).collect();
+    assert!(TEXT_CHARS.contains("letters"));
+    let text = |rng: &mut StdRng, max: usize| -> String {
+        let n = rng.random_range(1..=max);
+        (0..n).map(|_| text_chars[rng.random_range(0..text_chars.len())]).collect()
+    };
+    let mut lines = Vec::new();
+    for f in &spec.header {
+        let v = match &f.kind {
+            FieldKind::Text { max_chars } => text(rng, *max_chars),
+            FieldKind::Choice(cs) => cs[rng.random_range(0..cs.len())].clone(),
+        };
+        lines.push(format!("{}: {v}", f.label));
+    }
+    // Verbs that can be written (every slot non-empty).
+    let usable: Vec<(&VerbSpec, Vec<Vec<ObjRef>>)> = spec
+        .verbs
+        .iter()
+        .map(|v| (v, v.slots.clone().unwrap_or_else(|| vec![spec.objects.clone(); v.arity])))
+        .filter(|(_, s)| s.iter().all(|x| !x.is_empty()))
+        .collect();
+    let n = rng.random_range(spec.min_lines..=spec.max_lines);
+    for _ in 0..n {
+        let sub = spec.subgoal.as_ref().filter(|_| usable.is_empty() || rng.random_bool(0.3));
+        if let Some((label, k)) = sub {
+            lines.push(format!("{label}: {}", text(rng, *k)));
+        } else {
+            let (v, slots) = &usable[rng.random_range(0..usable.len())];
+            let mut l = format!("[{}]", v.name);
+            for s in slots {
+                l.push_str(&format!(" {}", s[rng.random_range(0..s.len())]));
+            }
+            lines.push(l);
+        }
+    }
+    lines.join("\n")
+}
