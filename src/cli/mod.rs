@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod bench;
 pub mod generate;
 
 #[derive(Parser, Debug)]
@@ -27,6 +28,8 @@ pub struct Cli {
 pub enum Command {
     /// Generate text from a prompt with the local model, optionally under a Lark grammar.
     Generate(generate::GenerateArgs),
+    /// Benchmarks that print JSON: `step bench llm`.
+    Bench(bench::BenchArgs),
 }
 
 /// Entry point of the binary: parse, set up logging, run, report.
@@ -48,6 +51,7 @@ pub fn main() -> ExitCode {
 fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Generate(a) => generate::run(&a),
+        Command::Bench(a) => bench::run(&a),
     }
 }
 
