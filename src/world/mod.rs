@@ -1,1 +1,15 @@
-//! (placeholder: filled in by its issue)
+//! The symbolic VirtualHome world: scene graphs, the state the robot acts on, and (in later files)
+//! the executor with VirtualHome's evolving-graph semantics, feasible actions and observations.
+//! It knows nothing about LLMs.
+//!
+//! - [`graph`]: the raw graph JSON (bare or EAI's `{init_graph, final_graph}`).
+//! - [`vocab`]: relations, states, properties.
+//! - [`state`]: [`World`], the indexed, cheaply cloned state with look-ups.
+
+pub mod graph;
+pub mod state;
+pub mod vocab;
+
+pub use graph::{parse_scene, read_scene, Edge, Graph, GraphError, Node, SceneFile};
+pub use state::{NodeView, World};
+pub use vocab::{Property, PropertySet, Relation, State, StateSet};
