@@ -6,10 +6,13 @@
 //! - [`vocab`]: relations, states, properties.
 //! - [`state`]: [`World`], the indexed, cheaply cloned state with look-ups.
 
+pub mod exec;
 pub mod graph;
+mod gold_probe;
 pub mod state;
 pub mod vocab;
 
+pub use exec::{Connective, Effects, ExecFailure, Fact, FailureKind, Missing};
 pub use graph::{parse_scene, read_scene, Edge, Graph, GraphError, Node, SceneFile};
 pub use state::{NodeView, World};
 pub use vocab::{Property, PropertySet, Relation, State, StateSet};

@@ -41,6 +41,7 @@ pub(crate) struct History {
     pub added_states: HashSet<(Ix, State)>,
     pub removed_states: HashSet<(Ix, State)>,
     pub character_hands_were_free: bool,
+    pub character_held_something: bool,
 }
 
 /// A read-only view of one node.
@@ -165,6 +166,7 @@ impl World {
         };
         let mut w = World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
         w.history.character_hands_were_free = w.hands_free();
+        w.history.character_held_something = !w.hands_free();
         Ok(w)
     }
 
@@ -383,6 +385,7 @@ impl World {
     pub fn start_new_run(&mut self) {
         let mut h = History::default();
         h.character_hands_were_free = self.hands_free();
+        h.character_held_something = !self.hands_free();
         // The current state becomes the baseline: remember its edges and states as "held earlier".
         for (f, l) in self.out.iter().enumerate() {
             for &(r, t) in l {

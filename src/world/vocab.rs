@@ -36,6 +36,7 @@ macro_rules! name_enum {
                 match self { $( $ty::$variant => $name, )* }
             }
 
+            #[allow(dead_code)] // Relation has no set type
             fn bit(self) -> u32 {
                 1u32 << (self as u32)
             }

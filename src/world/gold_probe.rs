@@ -1,0 +1,72 @@
+//! Development probe (ignored test): runs the EAI gold programs through the executor from an
+//! unpacked copy of the data, to check executor fidelity. The product's gold evaluation lives in
+//! `eval`; this only reports which steps fail and why.
+//! Run: `WORLD_GOLD_GRAPHS=/tmp/.../init_and_final_graphs cargo test --lib gold_probe -- --ignored --nocapture`.
+
+#[cfg(test)]
+mod tests {
+    use crate::program::parse_step_line;
+    use crate::world::World;
+    use std::path::Path;
+
+    #[test]
+    #[ignore]
+    fn gold_programs_execute() {
+        let Ok(dir) = std::env::var("WORLD_GOLD_GRAPHS") else { return };
+        let progs = Path::new("/work/shared/bench/virtualhome/eai/executable_programs");
+        let mut names: Vec<_> = std::fs::read_dir(progs).unwrap().map(|e| e.unwrap().file_name()).collect();
+        names.sort();
+        let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match) = (0, 0, 0u128, 0u128, 0);
+        for n in names {
+            let n = n.to_string_lossy().to_string();
+            let stem = n.trim_end_matches(".txt");
+            let text = std::fs::read_to_string(progs.join(&n)).unwrap();
+            let t0 = std::time::Instant::now();
+            let scene = crate::world::read_scene(&Path::new(&dir).join(format!("{stem}.json"))).unwrap();
+            let mut w = World::from_graph(&scene.init, stem).unwrap();
+            load_ns += t0.elapsed().as_nanos();
+            total += 1;
+            let t1 = std::time::Instant::now();
+            let mut failed = None;
+            for line in text.lines().filter(|l| l.trim_start().starts_with('[')) {
+                let a = parse_step_line(line).unwrap();
+                match w.execute(&a) {
+                    Ok(_) => {}
+                    Err(e) if e.eai_kind == crate::world::FailureKind::AdditionalStep => {
+                        println!("{stem}: skipped (additional): {} [{}]", e.message, e.kind)
+                    }
+                    Err(e) => {
+                        failed = Some(format!("{} [{} / eai {}]", e.message, e.kind, e.eai_kind));
+                        break;
+                    }
+                }
+            }
+            exec_ns += t1.elapsed().as_nanos();
+            match failed {
+                None => {
+                    ok += 1;
+                    if let Some(fg) = scene.final_graph {
+                        let f = World::from_graph(&fg, "final").unwrap();
+                        let (a, b) = (w.edges(), f.edges());
+                        let sa: Vec<_> = w.nodes().map(|n| (n.id, n.states)).collect();
+                        let sb: Vec<_> = f.nodes().map(|n| (n.id, n.states)).collect();
+                        if a == b && sa == sb {
+                            final_match += 1;
+                        } else if std::env::var("WORLD_GOLD_DIFF").is_ok() {
+                            let extra: Vec<_> = a.iter().filter(|e| !b.contains(e)).take(6).collect();
+                            let miss: Vec<_> = b.iter().filter(|e| !a.contains(e)).take(6).collect();
+                            let sd: Vec<_> = sa.iter().zip(&sb).filter(|(x, y)| x != y).take(4).collect();
+                            println!("{stem}: final differs: ours-only {extra:?} theirs-only {miss:?} states {sd:?}");
+                        }
+                    }
+                }
+                Some(m) => println!("{stem}: FAIL {m}"),
+            }
+        }
+        println!(
+            "executed {ok}/{total}; final graph identical {final_match}; load {:.1} ms total, exec {:.1} ms total",
+            load_ns as f64 / 1e6,
+            exec_ns as f64 / 1e6
+        );
+    }
+}
