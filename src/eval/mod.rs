@@ -4,15 +4,18 @@
 //! - [`dataset`]: EAI's files, read in place (the scene archive is streamed, never unpacked to disk).
 //! - [`task`]: [`Task`] (scene, goal, gold plan, relevant objects); users' task files.
 //! - [`goal`]: node, edge and action goals and their check.
+//! - [`run`]: running a plan on a task; per-task reports and the batch [`Summary`].
 
 pub mod dataset;
 pub mod goal;
+pub mod run;
 pub mod task;
 
 use std::path::{Path, PathBuf};
 
 pub use dataset::{EaiData, DATA_ENV};
 pub use goal::{ActionGoal, Count, EdgeGoal, Goal, GoalCheck, NodeGoal, RawGoal};
+pub use run::{run_plan, score, PlanInput, RunOutcome, StepOutcome, StepResult, Summary, TaskReport};
 pub use task::{relevant_by_diff, relevant_by_goal, Task, TaskOrigin};
 
 use crate::world::GraphError;
