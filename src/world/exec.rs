@@ -541,10 +541,19 @@ impl World {
         self.need_not_inside_closed(node)?;
         let hand = self.need_free_hand()?;
         let c = self.char_ix();
-        // Where it came from (first of ON, INSIDE, CLOSE that is not a room): PUTOBJBACK returns it there.
-        let from = [Relation::On, Relation::Inside, Relation::Close]
-            .into_iter()
-            .find_map(|r| self.from_ix(node, r).find(|&x| !self.is_room_ix(x)).map(|x| (x, r)));
+        let c = self.char_ix();
+        // Where it came from (first of ON, INSIDE, CLOSE that is not a room): PUTOBJBACK returns it
+        // there, and the robot becomes close to it. The simulator takes the first member of a Python
+        // set of ids, whose order follows `id & mask` for a table sized by the set's length; we take
+        // the same order, so that gold programs end in the same state (measured: see world-status).
+        let from = [Relation::On, Relation::Inside, Relation::Close].into_iter().find_map(|r| {
+            let ids: Vec<Ix> = self.from_ix(node, r).collect();
+            let mask = py_set_mask(ids.len());
+            ids.into_iter()
+                .filter(|&x| !self.is_room_ix(x))
+                .min_by_key(|&x| (self.id(x) as u64 & mask, self.id(x)))
+                .map(|x| (x, r))
+        });
         let mut ops = vec![
             Op::RemoveAll(node, GRAB_CLEARS, true),
             Op::AddBoth(c, Relation::Close, node),
@@ -982,6 +991,19 @@ impl World {
         log.entry((f, r, t)).or_insert(cur);
         self.remove_edge(f, r, t);
     }
+}
+
+/// The slot mask of a CPython set holding `n` small ints (table 8, grown ×4 used when 3/5 full).
+fn py_set_mask(n: usize) -> u64 {
+    let mut size: u64 = 8;
+    while (n as u64) * 5 >= (size - 1) * 3 {
+        let mut new = 8;
+        while new <= (n as u64) * 4 {
+            new <<= 1;
+        }
+        size = new.max(size * 2);
+    }
+    size - 1
 }
 
 fn clean(node: Ix) -> Vec<Op> {

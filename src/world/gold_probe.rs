@@ -31,7 +31,11 @@ mod tests {
             for line in text.lines().filter(|l| l.trim_start().starts_with('[')) {
                 let a = parse_step_line(line).unwrap();
                 match w.execute(&a) {
-                    Ok(_) => {}
+                    Ok(fx) => {
+                        if std::env::var("WORLD_GOLD_TRACE").is_ok_and(|t| t == stem) {
+                            println!("{a}: +{:?} -{:?} +{:?} -{:?}", fx.added, fx.removed, fx.states_added, fx.states_removed);
+                        }
+                    }
                     Err(e) if e.eai_kind == crate::world::FailureKind::AdditionalStep => {
                         println!("{stem}: skipped (additional): {} [{}]", e.message, e.kind)
                     }
