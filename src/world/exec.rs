@@ -541,7 +541,6 @@ impl World {
         self.need_not_inside_closed(node)?;
         let hand = self.need_free_hand()?;
         let c = self.char_ix();
-        let c = self.char_ix();
         // Where it came from (first of ON, INSIDE, CLOSE that is not a room): PUTOBJBACK returns it
         // there, and the robot becomes close to it. The simulator takes the first member of a Python
         // set of ids, whose order follows `id & mask` for a table sized by the set's length; we take
