@@ -6,12 +6,14 @@
 //! - [`vocab`]: relations, states, properties.
 //! - [`state`]: [`World`], the indexed, cheaply cloned state with look-ups.
 
+pub mod demo;
 pub mod exec;
 pub mod graph;
 mod gold_probe;
 pub mod state;
 pub mod vocab;
 
+pub use demo::{demo_kitchen, DEMO_KITCHEN_JSON};
 pub use exec::{Connective, Effects, ExecFailure, Fact, FailureKind, Missing};
 pub use graph::{parse_scene, read_scene, Edge, Graph, GraphError, Node, SceneFile};
 pub use state::{NodeView, World};
