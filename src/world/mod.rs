@@ -8,6 +8,8 @@
 
 pub mod demo;
 pub mod exec;
+#[cfg(test)]
+mod exec_tests;
 pub mod graph;
 mod gold_probe;
 pub mod state;
