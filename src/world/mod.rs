@@ -8,6 +8,7 @@
 
 pub mod demo;
 pub mod exec;
+pub mod feasible;
 #[cfg(test)]
 mod exec_tests;
 pub mod graph;
