@@ -16,15 +16,27 @@ mod tests {
         let progs = Path::new("/work/shared/bench/virtualhome/eai/executable_programs");
         let mut names: Vec<_> = std::fs::read_dir(progs).unwrap().map(|e| e.unwrap().file_name()).collect();
         names.sort();
-        let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match) = (0, 0, 0u128, 0u128, 0);
+        let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match, mut build_ns) = (0, 0, 0u128, 0u128, 0, 0u128);
         for n in names {
             let n = n.to_string_lossy().to_string();
             let stem = n.trim_end_matches(".txt");
             let text = std::fs::read_to_string(progs.join(&n)).unwrap();
             let t0 = std::time::Instant::now();
             let scene = crate::world::read_scene(&Path::new(&dir).join(format!("{stem}.json"))).unwrap();
+            let tb = std::time::Instant::now();
             let mut w = World::from_graph(&scene.init, stem).unwrap();
+            build_ns += tb.elapsed().as_nanos();
             load_ns += t0.elapsed().as_nanos();
+            if total == 0 {
+                let tc = std::time::Instant::now();
+                for _ in 0..1000 {
+                    std::hint::black_box(w.clone());
+                }
+                println!("clone: {:.1} us/clone ({} nodes, {} edges)", tc.elapsed().as_nanos() as f64 / 1e6, w.len(), w.edge_count());
+                let tf = std::time::Instant::now();
+                let f = w.feasible_actions();
+                println!("feasible_actions: {} actions in {:.1} ms", f.len(), tf.elapsed().as_nanos() as f64 / 1e6);
+            }
             total += 1;
             let t1 = std::time::Instant::now();
             let mut failed = None;
@@ -68,8 +80,9 @@ mod tests {
             }
         }
         println!(
-            "executed {ok}/{total}; final graph identical {final_match}; load {:.1} ms total, exec {:.1} ms total",
+            "executed {ok}/{total}; final graph identical {final_match}; read+parse+build {:.1} ms total (World build {:.1} ms), exec {:.1} ms total",
             load_ns as f64 / 1e6,
+            build_ns as f64 / 1e6,
             exec_ns as f64 / 1e6
         );
     }

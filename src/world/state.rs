@@ -17,7 +17,7 @@ use super::vocab::{Property, PropertySet, Relation, State, StateSet};
 pub(crate) type Ix = u32;
 
 /// The parts of a scene that actions never change.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub(crate) struct Static {
     pub ids: Vec<u32>,
     pub index: HashMap<u32, Ix>,
@@ -29,7 +29,8 @@ pub(crate) struct Static {
     pub by_class: BTreeMap<String, Vec<u32>>,
     pub body_parts: Vec<Ix>,
     pub character: Ix,
-    pub initial_edges: HashSet<(Ix, Relation, Ix)>,
+    /// The edges at load time, per node as in `World::out` (for the wrong-order rule).
+    pub initial_out: Vec<Vec<(Relation, Ix)>>,
     pub initial_states: Vec<StateSet>,
 }
 
@@ -129,7 +130,6 @@ impl World {
             (0..ids.len() as Ix).filter(|&i| props[i as usize].contains(Property::BodyPart)).collect();
         let mut out = vec![Vec::new(); ids.len()];
         let mut inc = vec![Vec::new(); ids.len()];
-        let mut initial_edges = HashSet::with_capacity(g.edges.len());
         for e in &g.edges {
             let r: Relation = e
                 .relation_type
@@ -141,15 +141,15 @@ impl World {
                 })
             };
             let (f, t) = (look(e.from_id)?, look(e.to_id)?);
-            // The simulator treats edges as a set: duplicates collapse.
-            if initial_edges.insert((f, r, t)) {
-                out[f as usize].push((r, t));
-                inc[t as usize].push((r, f));
-            }
+            out[f as usize].push((r, t));
+            inc[t as usize].push((r, f));
         }
+        // The simulator treats edges as a set: duplicates collapse.
         for l in out.iter_mut().chain(inc.iter_mut()) {
             l.sort_unstable();
+            l.dedup();
         }
+        let initial_out = out.clone();
         let initial_states = states.clone();
         let st = Static {
             ids,
@@ -161,7 +161,7 @@ impl World {
             by_class,
             body_parts,
             character,
-            initial_edges,
+            initial_out,
             initial_states,
         };
         let mut w = World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
@@ -380,32 +380,26 @@ impl World {
         Graph { nodes, edges }
     }
 
-    /// Forgets the run's history (what held earlier), making the current state the start of a new
-    /// run for the wrong-order rule. Grab records are kept.
+    /// Makes the current state the start of a new run: the wrong-order rule then looks back only to
+    /// here. Grab records (for PUTOBJBACK) are kept.
     pub fn start_new_run(&mut self) {
+        let mut st = (*self.st).clone();
+        st.initial_out = self.out.clone();
+        st.initial_states = self.states.clone();
+        self.st = Arc::new(st);
         let mut h = History::default();
         h.character_hands_were_free = self.hands_free();
         h.character_held_something = !self.hands_free();
-        // The current state becomes the baseline: remember its edges and states as "held earlier".
-        for (f, l) in self.out.iter().enumerate() {
-            for &(r, t) in l {
-                if !self.st.initial_edges.contains(&(f as Ix, r, t)) {
-                    h.added_edges.insert((f as Ix, r, t));
-                }
-            }
-        }
-        for (i, s) in self.states.iter().enumerate() {
-            for v in s.iter() {
-                h.added_states.insert((i as Ix, v));
-            }
-        }
         self.history = h;
     }
 
     // ----- history queries (for the wrong-order rule) -----------------------------------------
 
+    fn initially_has(&self, f: Ix, r: Relation, t: Ix) -> bool {
+        self.st.initial_out.get(f as usize).is_some_and(|l| l.binary_search(&(r, t)).is_ok())
+    }
     pub(crate) fn edge_held_earlier(&self, f: Ix, r: Relation, t: Ix) -> bool {
-        self.st.initial_edges.contains(&(f, r, t)) || self.history.added_edges.contains(&(f, r, t))
+        self.initially_has(f, r, t) || self.history.added_edges.contains(&(f, r, t))
     }
     pub(crate) fn state_held_earlier(&self, ix: Ix, s: State) -> bool {
         self.st.initial_states.get(ix as usize).is_some_and(|x| x.contains(s))
@@ -541,5 +535,9 @@ mod tests {
         let snapshot = w.clone();
         w.set_state(a, State::Dirty, true);
         assert!(!snapshot.node(12).unwrap().states.contains(State::Dirty), "clones are independent");
+        // A new run forgets what held before it.
+        w.start_new_run();
+        assert!(!w.edge_held_earlier(c, Relation::Close, a));
+        assert!(w.state_held_earlier(a, State::Dirty), "the new run starts from the current state");
     }
 }
