@@ -463,3 +463,53 @@ fn every_verb_has_a_test_above() {
     t.sort();
     assert_eq!(all, t);
 }
+
+#[test]
+fn walking_away_then_grabbing_is_wrong_order() {
+    let mut w = kitchen().world();
+    ok(&mut w, Verb::Walk, &[("apple", 12)]);
+    ok(&mut w, Verb::Walk, &[("fridge", 5)]);
+    let e = fails(&w, Verb::Grab, &[("apple", 12)], WrongOrder, "WALK to <apple> (12) first");
+    assert_eq!(e.eai_kind, WrongOrder);
+    assert_eq!(e.missing.len(), 1);
+}
+
+mod never_panics {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        /// Random action sequences (any verb, any id, any class name, any arity) never panic, and a
+        /// failed step leaves the state as it was.
+        #[test]
+        fn random_plans_on_the_demo_scene(steps in proptest::collection::vec(
+            (0usize..44, proptest::collection::vec((0u32..40, 0usize..3), 0..3)), 1..40)) {
+            let mut w = World::demo();
+            let classes = ["apple", "fridge", "nothing"];
+            for (v, args) in steps {
+                let verb = Verb::ALL[v % Verb::ALL.len()];
+                let args: Vec<ObjRef> = args
+                    .into_iter()
+                    .map(|(id, c)| {
+                        // Mostly the object's true class, sometimes a wrong one.
+                        let class = if c == 0 { classes[id as usize % 3].to_string() } else {
+                            w.node(id).map(|n| n.class_name.to_string()).unwrap_or_else(|| "ghost".into())
+                        };
+                        ObjRef::new(class, id)
+                    })
+                    .collect();
+                let a = Action { verb, args };
+                let before = w.edges();
+                let checked = w.check(&a);
+                match w.execute(&a) {
+                    Ok(_) => prop_assert!(checked.is_ok()),
+                    Err(e) => {
+                        prop_assert_eq!(Err(e), checked);
+                        prop_assert_eq!(before, w.edges());
+                    }
+                }
+            }
+        }
+    }
+}

@@ -85,5 +85,6 @@ mod tests {
             build_ns as f64 / 1e6,
             exec_ns as f64 / 1e6
         );
+        assert_eq!(ok, total, "every gold program executes");
     }
 }
