@@ -88,3 +88,75 @@ mod tests {
         assert_eq!(ok, total, "every gold program executes");
     }
 }
+
+/// Differential probe (ignored test): runs plans from `WORLD_DIFF_PLANS` (a JSON list of
+/// `{file, lines}`) and writes each plan's per-step outcome in EAI's error codes (0 wrong order,
+/// 1 missing step, 2 affordance, 3 unknown object, 4 already satisfied) and its final non-CLOSE
+/// edges and states to `WORLD_DIFF_OUT`, for comparison with EAI's own executor run on the same plans.
+#[cfg(test)]
+mod diff {
+    use crate::program::parse_step_line;
+    use crate::world::{FailureKind, World};
+    use serde_json::{json, Value};
+    use std::path::Path;
+
+    #[test]
+    #[ignore]
+    fn differential_plans() {
+        let (Ok(plans), Ok(out), Ok(dir)) =
+            (std::env::var("WORLD_DIFF_PLANS"), std::env::var("WORLD_DIFF_OUT"), std::env::var("WORLD_GOLD_GRAPHS"))
+        else {
+            return;
+        };
+        let plans: Vec<Value> = serde_json::from_str(&std::fs::read_to_string(plans).unwrap()).unwrap();
+        let mut results = Vec::new();
+        let mut cache: Option<(String, World)> = None;
+        for p in &plans {
+            let file = p["file"].as_str().unwrap().to_string();
+            if cache.as_ref().is_none_or(|(f, _)| *f != file) {
+                let w = World::load(&Path::new(&dir).join(format!("{file}.json"))).unwrap();
+                cache = Some((file.clone(), w));
+            }
+            let mut w = cache.as_ref().unwrap().1.clone();
+            let mut codes = Vec::new();
+            for line in p["lines"].as_array().unwrap() {
+                let Ok(a) = parse_step_line(line.as_str().unwrap()) else {
+                    codes.push(json!("parse"));
+                    break;
+                };
+                match w.execute(&a) {
+                    Ok(_) => codes.push(json!("ok")),
+                    Err(e) => {
+                        let code = match e.eai_kind {
+                            FailureKind::WrongOrder => 0,
+                            FailureKind::MissingStep => 1,
+                            FailureKind::Affordance => 2,
+                            FailureKind::UnknownObject | FailureKind::WrongArity => 3,
+                            FailureKind::AdditionalStep => 4,
+                        };
+                        codes.push(json!(code));
+                        if code != 4 {
+                            break;
+                        }
+                    }
+                }
+            }
+            let edges: Vec<Value> = w
+                .edges()
+                .into_iter()
+                .filter(|e| e.1 != crate::world::Relation::Close)
+                .map(|(f, r, t)| json!([f, r.name(), t]))
+                .collect();
+            let states: Vec<Value> = w
+                .nodes()
+                .map(|n| {
+                    let mut s: Vec<&str> = n.states.iter().map(|s| s.name()).collect();
+                    s.sort();
+                    json!([n.id, s])
+                })
+                .collect();
+            results.push(json!({"codes": codes, "edges": edges, "states": states}));
+        }
+        std::fs::write(out, serde_json::to_string(&results).unwrap()).unwrap();
+    }
+}
