@@ -152,6 +152,12 @@ mod tests {
     }
 
     #[test]
+    fn a_missing_file_is_named() {
+        let e = read_scene(Path::new("/nonexistent/scene.json")).unwrap_err().to_string();
+        assert!(e.starts_with("cannot read scene file /nonexistent/scene.json:"), "{e}");
+    }
+
+    #[test]
     fn graph_round_trips_through_json() {
         let s = parse_scene(BARE, "bare.json").unwrap();
         let back = parse_scene(&s.init.to_json_pretty(), "again").unwrap();
