@@ -7,6 +7,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod eval;
+pub mod sim;
+
 #[derive(Parser, Debug)]
 #[command(name = "step", version, about = "Offline subgoal-tree task planner for robots (STEP)")]
 pub struct Cli {
@@ -18,7 +21,12 @@ pub struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-pub enum Command {}
+pub enum Command {
+    /// Run plans in the symbolic VirtualHome world.
+    Sim(sim::SimArgs),
+    /// Score plans on task sets (EAI's VirtualHome tasks or your own).
+    Eval(eval::EvalArgs),
+}
 
 /// Entry point of the binary: parse, set up logging, run, report.
 pub fn main() -> ExitCode {
@@ -34,7 +42,10 @@ pub fn main() -> ExitCode {
 }
 
 fn run(command: Command) -> anyhow::Result<()> {
-    match command {}
+    match command {
+        Command::Sim(a) => sim::run(a),
+        Command::Eval(a) => eval::run(a),
+    }
 }
 
 fn init_tracing(filter: Option<&str>) {
