@@ -8,7 +8,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod eval;
 pub mod generate;
+pub mod sim;
 
 #[derive(Parser, Debug)]
 #[command(name = "step", version, about = "Offline subgoal-tree task planner for robots (STEP)")]
@@ -30,6 +32,10 @@ pub enum Command {
     Generate(generate::GenerateArgs),
     /// Benchmarks that print JSON: `step bench llm`.
     Bench(bench::BenchArgs),
+    /// Run plans in the symbolic VirtualHome world.
+    Sim(sim::SimArgs),
+    /// Score plans on task sets (EAI's VirtualHome tasks or your own).
+    Eval(eval::EvalArgs),
 }
 
 /// Entry point of the binary: parse, set up logging, run, report.
@@ -52,6 +58,8 @@ fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
+        Command::Sim(a) => sim::run(a),
+        Command::Eval(a) => eval::run(a),
     }
 }
 
