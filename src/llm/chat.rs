@@ -157,7 +157,7 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::llm::gguf::test_models::{real_model, QWEN, SMOLLM2};
+    use crate::llm::gguf::test_models::{real_gguf, QWEN, SMOLLM2};
     use crate::llm::tiny::{write_tiny_gguf, TinySpec};
 
     fn conversation() -> Vec<Message> {
@@ -197,8 +197,8 @@ mod tests {
 
     #[test]
     fn smollm2_template_renders_chatml() {
-        let Some(p) = real_model(SMOLLM2) else { return };
-        let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
+        let Some(g) = real_gguf(SMOLLM2) else { return };
+        let t = ChatTemplate::from_gguf(g).unwrap();
         assert_eq!(
             t.render(&conversation(), false).unwrap(),
             CHATML_CONVERSATION
@@ -214,8 +214,8 @@ mod tests {
 
     #[test]
     fn qwen_template_renders_chatml() {
-        let Some(p) = real_model(QWEN) else { return };
-        let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
+        let Some(g) = real_gguf(QWEN) else { return };
+        let t = ChatTemplate::from_gguf(g).unwrap();
         assert_eq!(
             t.render(&conversation(), false).unwrap(),
             CHATML_CONVERSATION

@@ -478,6 +478,20 @@ pub(crate) mod test_models {
         None
     }
 
+    /// The opened real model, shared by all tests of the binary (the header of the Qwen file
+    /// holds 300k strings; reading it once keeps the suite fast).
+    pub fn real_gguf(file: &'static str) -> Option<&'static super::GgufFile> {
+        use std::sync::OnceLock;
+        static SMOL: OnceLock<Option<super::GgufFile>> = OnceLock::new();
+        static QW: OnceLock<Option<super::GgufFile>> = OnceLock::new();
+        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
+        cell.get_or_init(|| {
+            let p = real_model(file)?;
+            Some(super::GgufFile::open(&p).expect("installed model opens"))
+        })
+        .as_ref()
+    }
+
     pub const SMOLLM2: &str = "SmolLM2-135M-Instruct.Q4_1.gguf";
     pub const QWEN: &str = "Qwen2.5-Coder-0.5B-Instruct.Q4_K_M.gguf";
 }
@@ -673,8 +687,7 @@ mod tests {
     #[test]
     fn real_models_open() {
         for (file, arch, layers) in [(SMOLLM2, Arch::Llama, 30), (QWEN, Arch::Qwen2, 24)] {
-            let Some(p) = real_model(file) else { continue };
-            let g = GgufFile::open(&p).unwrap();
+            let Some(g) = real_gguf(file) else { continue };
             assert_eq!(g.arch(), arch);
             assert_eq!(
                 g.metadata().get_usize(&g.arch_key("block_count")).unwrap(),

@@ -3,6 +3,6 @@ pub mod chat;
 pub mod error;
 pub mod gguf;
 pub mod locate;
-pub mod tokenizer;
 pub mod tiny;
+pub mod tokenizer;
 pub use error::{LlmError, Result};

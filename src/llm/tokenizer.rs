@@ -347,7 +347,7 @@ fn metadata_err(path: &Path, key: &str, detail: &str) -> LlmError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::llm::gguf::test_models::{real_model, QWEN, SMOLLM2};
+    use crate::llm::gguf::test_models::{real_gguf, real_model, QWEN, SMOLLM2};
     use crate::llm::gguf::Arch;
     use crate::llm::tiny::{tiny_gguf_bytes, TinySpec, TINY_SPECIAL_TOKENS};
     use candle_core::quantized::gguf_file::{Content, Value};
@@ -488,12 +488,8 @@ mod tests {
         static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
         static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
         let cell = if file == SMOLLM2 { &SMOL } else { &QW };
-        cell.get_or_init(|| {
-            let p = real_model(file)?;
-            let g = GgufFile::open(&p).unwrap();
-            Some(GgufTokenizer::from_gguf(&g).unwrap())
-        })
-        .as_ref()
+        cell.get_or_init(|| Some(GgufTokenizer::from_gguf(real_gguf(file)?).unwrap()))
+            .as_ref()
     }
 
     /// Reference ids for Qwen2's vocabulary (shared by Qwen2.5), taken from llama.cpp's test
@@ -594,5 +590,32 @@ mod tests {
             );
         }
         assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// Prints how long opening each real model's GGUF header and building its tokenizer take.
+    /// A measurement, not a check: `cargo test --release --lib tokenizer_build_time -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn tokenizer_build_time() {
+        for file in [SMOLLM2, QWEN] {
+            let Some(p) = real_model(file) else { continue };
+            let t0 = std::time::Instant::now();
+            let g = GgufFile::open(&p).unwrap();
+            let t1 = std::time::Instant::now();
+            let tok = GgufTokenizer::from_gguf(&g).unwrap();
+            let t2 = std::time::Instant::now();
+            let text = TEXTS.concat().repeat(20);
+            let ids = tok.encode(&text).unwrap();
+            let t3 = std::time::Instant::now();
+            eprintln!(
+                "{file}: open+validate {:.0} ms, tokenizer build {:.0} ms (vocab {}), encode {} bytes -> {} ids in {:.2} ms",
+                (t1 - t0).as_secs_f64() * 1e3,
+                (t2 - t1).as_secs_f64() * 1e3,
+                tok.vocab_size(),
+                text.len(),
+                ids.len(),
+                (t3 - t2).as_secs_f64() * 1e3
+            );
+        }
     }
 }
