@@ -23,10 +23,7 @@ pub struct Message {
 
 impl Message {
     pub fn new(role: impl Into<String>, content: impl Into<String>) -> Self {
-        Message {
-            role: role.into(),
-            content: content.into(),
-        }
+        Message { role: role.into(), content: content.into() }
     }
 
     pub fn system(content: impl Into<String>) -> Self {
@@ -66,10 +63,7 @@ impl ChatTemplate {
                 return Ok(String::new());
             };
             let tokens = md.get_str_array("tokenizer.ggml.tokens")?;
-            Ok(tokens
-                .get(id as usize)
-                .map(|s| s.to_string())
-                .unwrap_or_default())
+            Ok(tokens.get(id as usize).map(|s| s.to_string()).unwrap_or_default())
         };
         let name = format!("{}:{CHAT_TEMPLATE_KEY}", md.path().display());
         Self::new(
@@ -141,11 +135,7 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
     };
     let msg = match e.line() {
         Some(line) => {
-            let text = source
-                .lines()
-                .nth(line.saturating_sub(1))
-                .unwrap_or("")
-                .trim();
+            let text = source.lines().nth(line.saturating_sub(1)).unwrap_or("").trim();
             let text: String = text.chars().take(120).collect();
             format!("{name}, line {line}: {what}\n  {line} | {text}")
         }
@@ -182,10 +172,7 @@ mod tests {
             write_tiny_gguf(&spec, &p).unwrap();
             let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
             assert!(t.name().ends_with(":tokenizer.chat_template"));
-            assert_eq!(
-                t.render(&conversation(), false).unwrap(),
-                CHATML_CONVERSATION
-            );
+            assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
             let out = t.render(&[Message::user("Hi")], true).unwrap();
             assert_eq!(
                 out,
@@ -199,10 +186,7 @@ mod tests {
     fn smollm2_template_renders_chatml() {
         let Some(g) = real_gguf(SMOLLM2) else { return };
         let t = ChatTemplate::from_gguf(g).unwrap();
-        assert_eq!(
-            t.render(&conversation(), false).unwrap(),
-            CHATML_CONVERSATION
-        );
+        assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
         // Without a system turn the template adds its own default one.
         let out = t.render(&[Message::user("Hi")], true).unwrap();
         assert_eq!(
@@ -216,10 +200,7 @@ mod tests {
     fn qwen_template_renders_chatml() {
         let Some(g) = real_gguf(QWEN) else { return };
         let t = ChatTemplate::from_gguf(g).unwrap();
-        assert_eq!(
-            t.render(&conversation(), false).unwrap(),
-            CHATML_CONVERSATION
-        );
+        assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
         let out = t.render(&[Message::user("Hi")], true).unwrap();
         assert_eq!(
             out,
@@ -253,10 +234,7 @@ mod tests {
     fn runtime_errors_name_template_and_line() {
         let src = "{% if messages[0].role != 'system' %}\n{{ raise_exception('a system turn is required') }}\n{% endif %}";
         let t = ChatTemplate::new("strict", src, "", "").unwrap();
-        let msg = t
-            .render(&[Message::user("x")], true)
-            .unwrap_err()
-            .to_string();
+        let msg = t.render(&[Message::user("x")], true).unwrap_err().to_string();
         assert!(
             msg.contains("strict")
                 && msg.contains("line 2")

@@ -74,11 +74,7 @@ impl GgufTokenizer {
         }
         let tokens = md.get_str_array("tokenizer.ggml.tokens")?;
         if tokens.is_empty() {
-            return Err(metadata_err(
-                path,
-                "tokenizer.ggml.tokens",
-                "the vocabulary is empty",
-            ));
+            return Err(metadata_err(path, "tokenizer.ggml.tokens", "the vocabulary is empty"));
         }
         let n = tokens.len();
         let types = match md.value("tokenizer.ggml.token_type") {
@@ -112,21 +108,12 @@ impl GgufTokenizer {
         for (id, t) in tokens.iter().enumerate() {
             vocab.entry(t.to_string()).or_insert(id as u32);
         }
-        let bpe = BPE::builder()
-            .vocab_and_merges(vocab, merges)
-            .build()
-            .map_err(|e| {
-                tok_err(
-                    path,
-                    format!("the BPE vocabulary and merges do not fit together: {e}"),
-                )
-            })?;
+        let bpe = BPE::builder().vocab_and_merges(vocab, merges).build().map_err(|e| {
+            tok_err(path, format!("the BPE vocabulary and merges do not fit together: {e}"))
+        })?;
         let mut tokenizer = Tokenizer::new(bpe);
 
-        let pre = md
-            .opt_str("tokenizer.ggml.pre")?
-            .unwrap_or("default")
-            .to_string();
+        let pre = md.opt_str("tokenizer.ggml.pre")?.unwrap_or("default").to_string();
         match pre.as_str() {
             "smollm" | "starcoder" => {
                 let seq = Sequence::new(vec![
@@ -206,9 +193,7 @@ impl GgufTokenizer {
         })?;
         let pad_id = id_key("tokenizer.ggml.padding_token_id")?;
         let eot_id = id_key("tokenizer.ggml.eot_token_id")?;
-        let add_bos = md
-            .opt_bool("tokenizer.ggml.add_bos_token")?
-            .unwrap_or(false);
+        let add_bos = md.opt_bool("tokenizer.ggml.add_bos_token")?.unwrap_or(false);
         if add_bos {
             let bos = bos_id.ok_or_else(|| {
                 metadata_err(
@@ -356,9 +341,7 @@ mod tests {
 
     fn tiny_metadata(arch: Arch) -> HashMap<String, Value> {
         let bytes = tiny_gguf_bytes(&TinySpec::new(arch)).unwrap();
-        Content::read(&mut std::io::Cursor::new(bytes))
-            .unwrap()
-            .metadata
+        Content::read(&mut std::io::Cursor::new(bytes)).unwrap().metadata
     }
 
     fn build(map: &HashMap<String, Value>) -> Result<GgufTokenizer> {
@@ -400,17 +383,12 @@ mod tests {
         for arch in [Arch::Llama, Arch::Qwen2] {
             let map = tiny_metadata(arch);
             let tok = build(&map).unwrap();
-            let ids: Vec<u32> = TINY_SPECIAL_TOKENS
-                .iter()
-                .map(|t| tok.token_to_id(t).unwrap())
-                .collect();
+            let ids: Vec<u32> =
+                TINY_SPECIAL_TOKENS.iter().map(|t| tok.token_to_id(t).unwrap()).collect();
             let text = "<|im_start|>user\nWALK<|im_end|>\n<|endoftext|>";
             let enc = tok.encode(text).unwrap();
             assert_eq!(enc[0], ids[1], "{arch}");
-            assert!(
-                enc.contains(&ids[2]) && *enc.last().unwrap() == ids[0],
-                "{arch}: {enc:?}"
-            );
+            assert!(enc.contains(&ids[2]) && *enc.last().unwrap() == ids[0], "{arch}: {enc:?}");
             assert_eq!(tok.decode(&enc, false).unwrap(), text);
             assert_eq!(tok.decode(&enc, true).unwrap(), "user\nWALK\n");
             assert!(tok.is_special(ids[1]) && !tok.is_special(tok.token_to_id("WALK").unwrap()));
@@ -427,23 +405,14 @@ mod tests {
     #[test]
     fn unsupported_tokenizers_are_clear_errors() {
         let mut map = tiny_metadata(Arch::Llama);
-        map.insert(
-            "tokenizer.ggml.pre".into(),
-            Value::String("deepseek-llm".into()),
-        );
+        map.insert("tokenizer.ggml.pre".into(), Value::String("deepseek-llm".into()));
         let msg = build(&map).unwrap_err().to_string();
-        assert!(
-            msg.contains("deepseek-llm") && msg.contains("supported: smollm"),
-            "{msg}"
-        );
+        assert!(msg.contains("deepseek-llm") && msg.contains("supported: smollm"), "{msg}");
 
         let mut map = tiny_metadata(Arch::Llama);
         map.insert("tokenizer.ggml.model".into(), Value::String("llama".into()));
         let msg = build(&map).unwrap_err().to_string();
-        assert!(
-            msg.contains("'llama'") && msg.contains("only 'gpt2'"),
-            "{msg}"
-        );
+        assert!(msg.contains("'llama'") && msg.contains("only 'gpt2'"), "{msg}");
 
         let mut map = tiny_metadata(Arch::Qwen2);
         map.insert("tokenizer.ggml.eos_token_id".into(), Value::U32(99_999));
@@ -465,10 +434,7 @@ mod tests {
         let mut map = tiny_metadata(Arch::Qwen2);
         map.remove("tokenizer.ggml.tokens");
         let msg = build(&map).unwrap_err().to_string();
-        assert!(
-            msg.contains("tokenizer.ggml.tokens") && msg.contains("missing"),
-            "{msg}"
-        );
+        assert!(msg.contains("tokenizer.ggml.tokens") && msg.contains("missing"), "{msg}");
 
         let tok = build(&tiny_metadata(Arch::Qwen2)).unwrap();
         assert!(tok.decode(&[1_000_000], false).is_err());
@@ -488,8 +454,7 @@ mod tests {
         static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
         static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
         let cell = if file == SMOLLM2 { &SMOL } else { &QW };
-        cell.get_or_init(|| Some(GgufTokenizer::from_gguf(real_gguf(file)?).unwrap()))
-            .as_ref()
+        cell.get_or_init(|| Some(GgufTokenizer::from_gguf(real_gguf(file)?).unwrap())).as_ref()
     }
 
     /// Reference ids for Qwen2's vocabulary (shared by Qwen2.5), taken from llama.cpp's test
@@ -525,20 +490,15 @@ mod tests {
             // Real vocabularies compress ordinary English well below one token per 3 bytes.
             let text = "Task: put the apple in the fridge and close the door of the kitchen.";
             let n = tok.encode(text).unwrap().len();
-            assert!(
-                n * 3 < text.len(),
-                "{file}: {n} tokens for {} bytes",
-                text.len()
-            );
+            assert!(n * 3 < text.len(), "{file}: {n} tokens for {} bytes", text.len());
         }
     }
 
     #[test]
     fn real_chat_tokens_are_single_ids() {
-        for (file, start, end, eos) in [
-            (SMOLLM2, 1, 2, vec![0, 2]),
-            (QWEN, 151644, 151645, vec![151643, 151645]),
-        ] {
+        for (file, start, end, eos) in
+            [(SMOLLM2, 1, 2, vec![0, 2]), (QWEN, 151644, 151645, vec![151643, 151645])]
+        {
             let Some(tok) = real(file) else { continue };
             let ids = tok.encode("<|im_start|>user\nhello<|im_end|>\n").unwrap();
             assert_eq!(ids.first(), Some(&start), "{file}: {ids:?}");
@@ -572,10 +532,7 @@ mod tests {
             let outs: Vec<&str> = out.lines().collect();
             let mut ok = 0;
             for (text, want) in texts.iter().zip(&outs) {
-                let want: Vec<u32> = want
-                    .split_whitespace()
-                    .map(|x| x.parse().unwrap())
-                    .collect();
+                let want: Vec<u32> = want.split_whitespace().map(|x| x.parse().unwrap()).collect();
                 let got = tok.encode(text).unwrap();
                 if got == want {
                     ok += 1;
@@ -583,11 +540,7 @@ mod tests {
                     failures.push(format!("{name}: {text:?}: want {want:?} got {got:?}"));
                 }
             }
-            eprintln!(
-                "{name} (pre={}): {ok}/{} test vectors match",
-                tok.pre(),
-                outs.len()
-            );
+            eprintln!("{name} (pre={}): {ok}/{} test vectors match", tok.pre(), outs.len());
         }
         assert!(failures.is_empty(), "{}", failures.join("\n"));
     }
