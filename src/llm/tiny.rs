@@ -16,6 +16,7 @@ use rand::{Rng, SeedableRng};
 
 use super::error::{LlmError, Result};
 use super::gguf::Arch;
+use super::tokenizer::byte_to_unicode;
 
 /// The shape and initialisation of a tiny model. Build one with [`TinySpec::llama`],
 /// [`TinySpec::qwen2`] or [`TinySpec::new`], then adjust fields.
@@ -215,26 +216,6 @@ const MERGE_WORDS: &[&str] = &[
     "Plan",
 ];
 
-/// GPT-2's reversible byte-to-symbol map: printable Latin-1 bytes stand for themselves, the
-/// others are shifted to code points from 256 upwards, so every byte is a visible character.
-pub fn byte_to_unicode() -> [char; 256] {
-    let mut out = ['\0'; 256];
-    let mut shifted = 0u32;
-    for b in 0u32..256 {
-        let printable =
-            (0x21..=0x7e).contains(&b) || (0xa1..=0xac).contains(&b) || (0xae..=0xff).contains(&b);
-        let cp = if printable {
-            b
-        } else {
-            shifted += 1;
-            255 + shifted
-        };
-        // All code points here are below 0x200, valid scalar values.
-        out[b as usize] = char::from_u32(cp).unwrap_or('\u{fffd}');
-    }
-    out
-}
-
 /// The tiny vocabulary of `arch`. The llama vocabulary puts the control tokens first (as SmolLM2:
 /// `<|endoftext|>` 0, `<|im_start|>` 1 = bos, `<|im_end|>` 2 = eos); the qwen2 one puts them last
 /// (as Qwen2.5: bos = pad = `<|endoftext|>`, eos = `<|im_end|>`), so both layouts are exercised.
@@ -431,17 +412,6 @@ mod tests {
         let mut cur = std::io::Cursor::new(bytes);
         let content = Content::read(&mut cur).expect("read back");
         (content, cur)
-    }
-
-    #[test]
-    fn byte_map_is_a_bijection_onto_visible_chars() {
-        let m = byte_to_unicode();
-        let set: std::collections::BTreeSet<char> = m.iter().copied().collect();
-        assert_eq!(set.len(), 256);
-        assert!(m.iter().all(|c| !c.is_whitespace() && !c.is_control()));
-        assert_eq!(m[b' ' as usize], 'Ġ');
-        assert_eq!(m[b'\n' as usize], 'Ċ');
-        assert_eq!(m[b'A' as usize], 'A');
     }
 
     #[test]

@@ -39,6 +39,37 @@ const TYPE_USER_DEFINED: i64 = 4;
 /// Tokens that end a chat turn in the ChatML family, besides the declared eos.
 const CHAT_END_TOKENS: &[&str] = &["<|im_end|>", "<|endoftext|>"];
 
+/// GPT-2's reversible byte-to-symbol map: printable Latin-1 bytes stand for themselves, the
+/// others are shifted to code points from 256 upwards, so every byte is a visible character.
+pub fn byte_to_unicode() -> [char; 256] {
+    let mut out = ['\0'; 256];
+    let mut shifted = 0u32;
+    for b in 0u32..256 {
+        let printable =
+            (0x21..=0x7e).contains(&b) || (0xa1..=0xac).contains(&b) || (0xae..=0xff).contains(&b);
+        let cp = if printable {
+            b
+        } else {
+            shifted += 1;
+            255 + shifted
+        };
+        // All code points here are below 0x200, valid scalar values.
+        out[b as usize] = char::from_u32(cp).unwrap_or('\u{fffd}');
+    }
+    out
+}
+
+/// The inverse of [`byte_to_unicode`], indexed by code point (all symbols are below 0x144).
+fn unicode_to_byte() -> Vec<Option<u8>> {
+    let map = byte_to_unicode();
+    let len = map.iter().map(|&c| c as usize).max().unwrap_or(0) + 1;
+    let mut out = vec![None; len];
+    for (b, c) in map.iter().enumerate() {
+        out[*c as usize] = Some(b as u8);
+    }
+    out
+}
+
 /// A model's tokenizer with the ids the decoder needs.
 #[derive(Debug, Clone)]
 pub struct GgufTokenizer {
@@ -51,6 +82,10 @@ pub struct GgufTokenizer {
     add_bos: bool,
     pre: String,
     special_ids: BTreeSet<u32>,
+    /// Ids of added (control and user-defined) tokens, whose text is literal, not byte symbols.
+    added_ids: BTreeSet<u32>,
+    /// Byte-level symbol -> byte, by code point.
+    sym_to_byte: Vec<Option<u8>>,
 }
 
 impl GgufTokenizer {
@@ -156,12 +191,14 @@ impl GgufTokenizer {
         // Control tokens are special (skipped when decoding with skip_special); user-defined ones
         // (Qwen's <tool_call>) are matched whole but decode as text, as in the original tokenizers.
         let mut special_ids = BTreeSet::new();
+        let mut added_ids = BTreeSet::new();
         let mut control = Vec::new();
         let mut user = Vec::new();
         for (id, (t, ty)) in tokens.iter().zip(&types).enumerate() {
             match *ty {
                 TYPE_CONTROL => {
                     special_ids.insert(id as u32);
+                    added_ids.insert(id as u32);
                     control.push(AddedToken::from(t.to_string(), true));
                 }
                 TYPE_USER_DEFINED => {
@@ -229,6 +266,8 @@ impl GgufTokenizer {
             add_bos,
             pre,
             special_ids,
+            added_ids,
+            sym_to_byte: unicode_to_byte(),
         })
     }
 
@@ -311,6 +350,26 @@ impl GgufTokenizer {
         self.tokenizer.token_to_id(token)
     }
 
+    /// The raw bytes token `id` stands for: byte-level symbols mapped back to bytes, an added
+    /// token's literal text. A token may hold part of a UTF-8 character, so streaming output
+    /// should collect bytes and decode complete characters. `None` for an unknown id.
+    pub fn token_bytes(&self, id: u32) -> Option<Vec<u8>> {
+        let tok = self.tokenizer.id_to_token(id)?;
+        if self.added_ids.contains(&id) {
+            return Some(tok.into_bytes());
+        }
+        // A symbol outside the byte map (never in a well-formed byte-level vocabulary) is kept
+        // as its UTF-8 text rather than dropped.
+        let mut out = Vec::with_capacity(tok.len());
+        for c in tok.chars() {
+            match self.sym_to_byte.get(c as usize).copied().flatten() {
+                Some(b) => out.push(b),
+                None => out.extend_from_slice(c.encode_utf8(&mut [0; 4]).as_bytes()),
+            }
+        }
+        Some(out)
+    }
+
     /// The vocabulary's spelling of token `id`, if any.
     pub fn id_to_token(&self, id: u32) -> Option<String> {
         self.tokenizer.id_to_token(id)
@@ -375,6 +434,39 @@ mod tests {
             assert_eq!(ids, vec![walk], "{arch}: merges should make WALK one token");
             let apple = tok.token_to_id("apple").unwrap();
             assert!(tok.encode("[GRAB] <apple> (1)").unwrap().contains(&apple));
+        }
+    }
+
+    #[test]
+    fn byte_map_is_a_bijection_onto_visible_chars() {
+        let m = byte_to_unicode();
+        let set: std::collections::BTreeSet<char> = m.iter().copied().collect();
+        assert_eq!(set.len(), 256);
+        assert!(m.iter().all(|c| !c.is_whitespace() && !c.is_control()));
+        assert_eq!(m[b' ' as usize], 'Ġ');
+        assert_eq!(m[b'\n' as usize], 'Ċ');
+        assert_eq!(m[b'A' as usize], 'A');
+    }
+
+    #[test]
+    fn token_bytes_reassemble_the_text() {
+        for arch in [Arch::Llama, Arch::Qwen2] {
+            let tok = build(&tiny_metadata(arch)).unwrap();
+            for text in TEXTS.iter().chain(&["<|im_start|>user\n🤖<|im_end|>"]) {
+                let ids = tok.encode(text).unwrap();
+                let bytes: Vec<u8> =
+                    ids.iter().flat_map(|&id| tok.token_bytes(id).unwrap()).collect();
+                assert_eq!(bytes, text.as_bytes(), "{arch}: {text:?}");
+            }
+            assert_eq!(tok.token_bytes(tok.token_to_id("Ġ<").unwrap()).unwrap(), b" <");
+            assert_eq!(tok.token_bytes(1_000_000), None);
+        }
+        for file in [SMOLLM2, QWEN] {
+            let Some(tok) = real(file) else { continue };
+            let text = TEXTS.concat();
+            let ids = tok.encode(&text).unwrap();
+            let bytes: Vec<u8> = ids.iter().flat_map(|&id| tok.token_bytes(id).unwrap()).collect();
+            assert_eq!(String::from_utf8(bytes).unwrap(), text, "{file}");
         }
     }
 
