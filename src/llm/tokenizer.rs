@@ -532,6 +532,35 @@ mod tests {
         assert!(tok.decode(&[1_000_000], false).is_err());
     }
 
+    /// The pre-tokenizer's pieces of `text`, in byte-level spelling.
+    fn pieces(tok: &GgufTokenizer, text: &str) -> Vec<String> {
+        use tokenizers::{OffsetReferential, OffsetType, PreTokenizedString, PreTokenizer};
+        let mut pts = PreTokenizedString::from(text);
+        tok.tokenizer().get_pre_tokenizer().unwrap().pre_tokenize(&mut pts).unwrap();
+        pts.get_splits(OffsetReferential::Original, OffsetType::Byte)
+            .into_iter()
+            .map(|(s, _, _)| s.to_string())
+            .collect()
+    }
+
+    #[test]
+    fn missing_pre_falls_back_to_gpt2_and_qwen2_normalises_to_nfc() {
+        let mut map = tiny_metadata(Arch::Llama);
+        map.remove("tokenizer.ggml.pre");
+        let tok = build(&map).unwrap();
+        assert_eq!(tok.pre(), "default");
+        // GPT-2's regex keeps a digit run together; smollm splits each digit; qwen2 too.
+        let smol = build(&tiny_metadata(Arch::Llama)).unwrap();
+        assert_eq!(pieces(&tok, "x 123"), ["x", "Ġ123"]);
+        assert_eq!(pieces(&smol, "x 123"), ["x", "Ġ", "1", "2", "3"]);
+        assert_eq!(tok.decode(&tok.encode(TEXTS[4]).unwrap(), false).unwrap(), TEXTS[4]);
+        // Qwen2 normalises to NFC first: a decomposed "é" encodes as the composed one.
+        let qwen = build(&tiny_metadata(Arch::Qwen2)).unwrap();
+        assert_eq!(pieces(&qwen, "x 123 <apple>"), ["x", "Ġ", "1", "2", "3", "Ġ<", "apple", ">"]);
+        assert_eq!(qwen.encode("cafe\u{301}").unwrap(), qwen.encode("caf\u{e9}").unwrap());
+        assert_ne!(smol.encode("cafe\u{301}").unwrap(), smol.encode("caf\u{e9}").unwrap());
+    }
+
     #[test]
     fn add_bos_token_prepends_bos() {
         let mut map = tiny_metadata(Arch::Llama);
