@@ -107,22 +107,22 @@ impl TinySpec {
         if self.n_layer == 0 || self.n_head == 0 || self.n_head_kv == 0 {
             return bad("n_layer, n_head and n_head_kv must be at least 1".into());
         }
-        if self.n_embd % self.n_head != 0 {
+        if !self.n_embd.is_multiple_of(self.n_head) {
             return bad(format!(
                 "n_embd {} is not a multiple of n_head {}",
                 self.n_embd, self.n_head
             ));
         }
-        if self.n_head % self.n_head_kv != 0 {
+        if !self.n_head.is_multiple_of(self.n_head_kv) {
             return bad(format!(
                 "n_head {} is not a multiple of n_head_kv {}",
                 self.n_head, self.n_head_kv
             ));
         }
-        if self.head_dim() % 2 != 0 {
+        if !self.head_dim().is_multiple_of(2) {
             return bad(format!("head dim {} must be even for rope", self.head_dim()));
         }
-        if self.n_embd % max_block != 0 || self.n_ff % max_block != 0 {
+        if !self.n_embd.is_multiple_of(max_block) || !self.n_ff.is_multiple_of(max_block) {
             return bad(format!(
                 "n_embd {} and n_ff {} must be multiples of the quant block size {max_block}",
                 self.n_embd, self.n_ff
@@ -287,8 +287,11 @@ fn qtensor(data: Vec<f32>, shape: &[usize], dtype: GgmlDType) -> Result<QTensor>
     Ok(QTensor::quantize(&t, dtype)?)
 }
 
+/// Metadata entries and named tensors, in file order.
+type TinyParts = (Vec<(String, Value)>, Vec<(String, QTensor)>);
+
 /// All metadata and tensors of the tiny model, in file order.
-fn build(spec: &TinySpec) -> Result<(Vec<(String, Value)>, Vec<(String, QTensor)>)> {
+fn build(spec: &TinySpec) -> Result<TinyParts> {
     spec.validate()?;
     let vocab = tiny_vocab(spec.arch);
     let n_vocab = vocab.tokens.len();
