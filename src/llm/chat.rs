@@ -209,6 +209,32 @@ mod tests {
         );
     }
 
+    /// The rendered prompt, encoded by the same model's tokenizer, has each ChatML marker as one
+    /// control id: 3 `<|im_start|>` and 2 `<|im_end|>` for system + user + generation prompt.
+    #[test]
+    fn rendered_prompts_encode_with_single_control_ids() {
+        use crate::llm::tokenizer::GgufTokenizer;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("tiny.gguf");
+        write_tiny_gguf(&TinySpec::qwen2(), &p).unwrap();
+        let tiny = GgufFile::open(&p).unwrap();
+        let models = [Some(&tiny), real_gguf(SMOLLM2), real_gguf(QWEN)];
+        for g in models.into_iter().flatten() {
+            let tok = GgufTokenizer::from_gguf(g).unwrap();
+            let text = ChatTemplate::from_gguf(g)
+                .unwrap()
+                .render(&[Message::system("Plan."), Message::user("Go.")], true)
+                .unwrap();
+            let ids = tok.encode(&text).unwrap();
+            let start = tok.token_to_id("<|im_start|>").unwrap();
+            let end = tok.token_to_id("<|im_end|>").unwrap();
+            assert_eq!(ids.first(), Some(&start));
+            assert_eq!(ids.iter().filter(|&&i| i == start).count(), 3, "{}", g.path().display());
+            assert_eq!(ids.iter().filter(|&&i| i == end).count(), 2, "{}", g.path().display());
+            assert_eq!(tok.decode(&ids, false).unwrap(), text);
+        }
+    }
+
     #[test]
     fn python_string_methods_and_tokens_work() {
         let src = "{{ bos_token }}{% for m in messages %}{{ m.role.upper() }}:{{ m.content.strip() }}|{% endfor %}{{ eos_token }}";
