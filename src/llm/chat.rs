@@ -147,7 +147,7 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::llm::gguf::test_models::{real_gguf, QWEN, SMOLLM2};
+    use crate::llm::gguf::test_models::{real_gguf, real_tokenizer, QWEN, SMOLLM2};
     use crate::llm::tiny::{write_tiny_gguf, TinySpec};
 
     fn conversation() -> Vec<Message> {
@@ -218,9 +218,13 @@ mod tests {
         let p = dir.path().join("tiny.gguf");
         write_tiny_gguf(&TinySpec::qwen2(), &p).unwrap();
         let tiny = GgufFile::open(&p).unwrap();
-        let models = [Some(&tiny), real_gguf(SMOLLM2), real_gguf(QWEN)];
-        for g in models.into_iter().flatten() {
-            let tok = GgufTokenizer::from_gguf(g).unwrap();
+        let tiny_tok = GgufTokenizer::from_gguf(&tiny).unwrap();
+        let models = [
+            Some((&tiny, &tiny_tok)),
+            real_gguf(SMOLLM2).zip(real_tokenizer(SMOLLM2)),
+            real_gguf(QWEN).zip(real_tokenizer(QWEN)),
+        ];
+        for (g, tok) in models.into_iter().flatten() {
             let text = ChatTemplate::from_gguf(g)
                 .unwrap()
                 .render(&[Message::system("Plan."), Message::user("Go.")], true)

@@ -451,6 +451,21 @@ pub(crate) mod test_models {
         .as_ref()
     }
 
+    /// The real model's tokenizer, built once per test binary (a build reads the whole vocabulary).
+    pub fn real_tokenizer(
+        file: &'static str,
+    ) -> Option<&'static crate::llm::tokenizer::GgufTokenizer> {
+        use crate::llm::tokenizer::GgufTokenizer;
+        use std::sync::OnceLock;
+        static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
+        cell.get_or_init(|| {
+            Some(GgufTokenizer::from_gguf(real_gguf(file)?).expect("tokenizer builds"))
+        })
+        .as_ref()
+    }
+
     pub const SMOLLM2: &str = "SmolLM2-135M-Instruct.Q4_1.gguf";
     pub const QWEN: &str = "Qwen2.5-Coder-0.5B-Instruct.Q4_K_M.gguf";
 }

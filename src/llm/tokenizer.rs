@@ -391,12 +391,11 @@ fn metadata_err(path: &Path, key: &str, detail: &str) -> LlmError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::llm::gguf::test_models::{real_gguf, real_model, QWEN, SMOLLM2};
+    use crate::llm::gguf::test_models::{real_model, real_tokenizer, QWEN, SMOLLM2};
     use crate::llm::gguf::Arch;
     use crate::llm::tiny::{tiny_gguf_bytes, TinySpec, TINY_SPECIAL_TOKENS};
     use candle_core::quantized::gguf_file::{Content, Value};
     use std::collections::HashMap;
-    use std::sync::OnceLock;
 
     fn tiny_metadata(arch: Arch) -> HashMap<String, Value> {
         let bytes = tiny_gguf_bytes(&TinySpec::new(arch)).unwrap();
@@ -570,12 +569,8 @@ mod tests {
         assert_eq!(ids, vec![1, tok.token_to_id("WALK").unwrap()]);
     }
 
-    /// The real model's tokenizer, built once per test binary (a build reads the whole vocabulary).
     fn real(file: &'static str) -> Option<&'static GgufTokenizer> {
-        static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
-        static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
-        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
-        cell.get_or_init(|| Some(GgufTokenizer::from_gguf(real_gguf(file)?).unwrap())).as_ref()
+        real_tokenizer(file)
     }
 
     /// Reference ids for Qwen2's vocabulary (shared by Qwen2.5), taken from llama.cpp's test
