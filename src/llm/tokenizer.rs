@@ -595,6 +595,46 @@ mod tests {
         }
     }
 
+    /// Reference ids for SmolLM2, produced by llama.cpp's own tokenizer (`llama_tokenize`, from the
+    /// llama.cpp vendored in the llama-cpp-python 0.3.36 sdist, parse_special on, no BOS) on the
+    /// installed SmolLM2-135M-Instruct.Q4_1.gguf: an implementation independent of this one. The
+    /// same tool agreed with this tokenizer on all 58 texts of the one-off check (see
+    /// `vocab_test_vectors`), and on the Qwen2.5 file too.
+    #[test]
+    fn smollm2_ids_match_reference() {
+        let Some(tok) = real(SMOLLM2) else { return };
+        let cases: &[(&str, &[u32])] = &[
+            (
+                "Task: put the apple in the fridge.\nPlan:\n",
+                &[22188, 42, 1830, 260, 11977, 281, 260, 28867, 30, 198, 23296, 42, 198],
+            ),
+            (
+                "[PUTBACK] <soap> (1002) <sink> (1001)",
+                &[75, 21348, 32910, 77, 2067, 559, 512, 46, 365, 33, 32, 32, 34, 25, 2067, 99, 900, 46, 365, 33, 32, 32, 33, 25],
+            ),
+            (
+                "digits 1234567890 and 3.14159 and -42",
+                &[37307, 216, 33, 34, 35, 36, 37, 38, 39, 40, 41, 32, 284, 216, 35, 30, 33, 36, 33, 37, 41, 284, 731, 36, 34],
+            ),
+            (
+                "emoji 🤖🍎 and symbols ∑ ≤ → ©",
+                &[391, 33777, 15107, 114, 240, 10813, 231, 232, 284, 7349, 19995, 235, 38599, 17822, 11435],
+            ),
+            (
+                "<|im_start|>system\nYou are a robot task planner.<|im_end|>\n<|im_start|>assistant\n",
+                &[1, 9690, 198, 2683, 359, 253, 8085, 3856, 34830, 30, 2, 198, 1, 520, 9531, 198],
+            ),
+            ("Hello world", &[19556, 905]),
+            (" Hello world", &[38699, 905]),
+            ("Äpfel", &[142, 222, 96, 34520]),
+            ("\n\n", &[1116]),
+            (" this is 🦙.cpp", &[451, 314, 15107, 116, 243, 30, 35392]),
+        ];
+        for (text, want) in cases {
+            assert_eq!(tok.encode(text).unwrap(), *want, "{text:?}");
+        }
+    }
+
     #[test]
     fn real_tokenizers_round_trip() {
         for file in [SMOLLM2, QWEN] {
