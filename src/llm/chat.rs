@@ -23,10 +23,7 @@ pub struct Message {
 
 impl Message {
     pub fn new(role: impl Into<String>, content: impl Into<String>) -> Self {
-        Message {
-            role: role.into(),
-            content: content.into(),
-        }
+        Message { role: role.into(), content: content.into() }
     }
 
     pub fn system(content: impl Into<String>) -> Self {
@@ -66,10 +63,7 @@ impl ChatTemplate {
                 return Ok(String::new());
             };
             let tokens = md.get_str_array("tokenizer.ggml.tokens")?;
-            Ok(tokens
-                .get(id as usize)
-                .map(|s| s.to_string())
-                .unwrap_or_default())
+            Ok(tokens.get(id as usize).map(|s| s.to_string()).unwrap_or_default())
         };
         let name = format!("{}:{CHAT_TEMPLATE_KEY}", md.path().display());
         Self::new(
@@ -141,11 +135,7 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
     };
     let msg = match e.line() {
         Some(line) => {
-            let text = source
-                .lines()
-                .nth(line.saturating_sub(1))
-                .unwrap_or("")
-                .trim();
+            let text = source.lines().nth(line.saturating_sub(1)).unwrap_or("").trim();
             let text: String = text.chars().take(120).collect();
             format!("{name}, line {line}: {what}\n  {line} | {text}")
         }
@@ -157,7 +147,7 @@ fn template_error(name: &str, source: &str, e: &minijinja::Error) -> LlmError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::llm::gguf::test_models::{real_model, QWEN, SMOLLM2};
+    use crate::llm::gguf::test_models::{real_gguf, real_tokenizer, QWEN, SMOLLM2};
     use crate::llm::tiny::{write_tiny_gguf, TinySpec};
 
     fn conversation() -> Vec<Message> {
@@ -182,10 +172,7 @@ mod tests {
             write_tiny_gguf(&spec, &p).unwrap();
             let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
             assert!(t.name().ends_with(":tokenizer.chat_template"));
-            assert_eq!(
-                t.render(&conversation(), false).unwrap(),
-                CHATML_CONVERSATION
-            );
+            assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
             let out = t.render(&[Message::user("Hi")], true).unwrap();
             assert_eq!(
                 out,
@@ -197,12 +184,9 @@ mod tests {
 
     #[test]
     fn smollm2_template_renders_chatml() {
-        let Some(p) = real_model(SMOLLM2) else { return };
-        let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
-        assert_eq!(
-            t.render(&conversation(), false).unwrap(),
-            CHATML_CONVERSATION
-        );
+        let Some(g) = real_gguf(SMOLLM2) else { return };
+        let t = ChatTemplate::from_gguf(g).unwrap();
+        assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
         // Without a system turn the template adds its own default one.
         let out = t.render(&[Message::user("Hi")], true).unwrap();
         assert_eq!(
@@ -214,18 +198,45 @@ mod tests {
 
     #[test]
     fn qwen_template_renders_chatml() {
-        let Some(p) = real_model(QWEN) else { return };
-        let t = ChatTemplate::from_gguf(&GgufFile::open(&p).unwrap()).unwrap();
-        assert_eq!(
-            t.render(&conversation(), false).unwrap(),
-            CHATML_CONVERSATION
-        );
+        let Some(g) = real_gguf(QWEN) else { return };
+        let t = ChatTemplate::from_gguf(g).unwrap();
+        assert_eq!(t.render(&conversation(), false).unwrap(), CHATML_CONVERSATION);
         let out = t.render(&[Message::user("Hi")], true).unwrap();
         assert_eq!(
             out,
             "<|im_start|>system\nYou are Qwen, created by Alibaba Cloud. You are a helpful assistant.<|im_end|>\n\
              <|im_start|>user\nHi<|im_end|>\n<|im_start|>assistant\n"
         );
+    }
+
+    /// The rendered prompt, encoded by the same model's tokenizer, has each ChatML marker as one
+    /// control id: 3 `<|im_start|>` and 2 `<|im_end|>` for system + user + generation prompt.
+    #[test]
+    fn rendered_prompts_encode_with_single_control_ids() {
+        use crate::llm::tokenizer::GgufTokenizer;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("tiny.gguf");
+        write_tiny_gguf(&TinySpec::qwen2(), &p).unwrap();
+        let tiny = GgufFile::open(&p).unwrap();
+        let tiny_tok = GgufTokenizer::from_gguf(&tiny).unwrap();
+        let models = [
+            Some((&tiny, &tiny_tok)),
+            real_gguf(SMOLLM2).zip(real_tokenizer(SMOLLM2)),
+            real_gguf(QWEN).zip(real_tokenizer(QWEN)),
+        ];
+        for (g, tok) in models.into_iter().flatten() {
+            let text = ChatTemplate::from_gguf(g)
+                .unwrap()
+                .render(&[Message::system("Plan."), Message::user("Go.")], true)
+                .unwrap();
+            let ids = tok.encode(&text).unwrap();
+            let start = tok.token_to_id("<|im_start|>").unwrap();
+            let end = tok.token_to_id("<|im_end|>").unwrap();
+            assert_eq!(ids.first(), Some(&start));
+            assert_eq!(ids.iter().filter(|&&i| i == start).count(), 3, "{}", g.path().display());
+            assert_eq!(ids.iter().filter(|&&i| i == end).count(), 2, "{}", g.path().display());
+            assert_eq!(tok.decode(&ids, false).unwrap(), text);
+        }
     }
 
     #[test]
@@ -253,10 +264,7 @@ mod tests {
     fn runtime_errors_name_template_and_line() {
         let src = "{% if messages[0].role != 'system' %}\n{{ raise_exception('a system turn is required') }}\n{% endif %}";
         let t = ChatTemplate::new("strict", src, "", "").unwrap();
-        let msg = t
-            .render(&[Message::user("x")], true)
-            .unwrap_err()
-            .to_string();
+        let msg = t.render(&[Message::user("x")], true).unwrap_err().to_string();
         assert!(
             msg.contains("strict")
                 && msg.contains("line 2")

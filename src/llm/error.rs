@@ -14,11 +14,7 @@ pub enum LlmError {
     #[error("{path}: unsupported model architecture '{arch}' (supported: llama, qwen2)")]
     UnsupportedArch { path: PathBuf, arch: String },
     #[error("{path}: GGUF metadata '{key}' is missing or malformed: {detail}")]
-    Metadata {
-        path: PathBuf,
-        key: String,
-        detail: String,
-    },
+    Metadata { path: PathBuf, key: String, detail: String },
     #[error("tiny model spec: {0}")]
     TinySpec(String),
     #[error("tokenizer: {0}")]
@@ -30,10 +26,7 @@ pub enum LlmError {
     #[error("decoding: {0}")]
     Decode(String),
     #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Io { path: PathBuf, source: std::io::Error },
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
 }

@@ -66,19 +66,14 @@ pub struct GgufFile {
 impl GgufFile {
     /// Opens and validates the GGUF file at `path`.
     pub fn open(path: &Path) -> Result<Self> {
-        let file = File::open(path).map_err(|source| LlmError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let file =
+            File::open(path).map_err(|source| LlmError::Io { path: path.to_path_buf(), source })?;
         Self::from_reader(&mut BufReader::new(file), path)
     }
 
     /// Validates GGUF data from any reader positioned at its start; `path` names it in errors.
     pub fn from_reader<R: Read + Seek>(reader: &mut R, path: &Path) -> Result<Self> {
-        let io = |source| LlmError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
+        let io = |source| LlmError::Io { path: path.to_path_buf(), source };
         let file_len = reader.seek(SeekFrom::End(0)).map_err(io)?;
         reader.seek(SeekFrom::Start(0)).map_err(io)?;
         check_magic(reader, file_len, path)?;
@@ -109,12 +104,7 @@ impl GgufFile {
             path: path.to_path_buf(),
             arch: arch_name,
         })?;
-        Ok(GgufFile {
-            path: path.to_path_buf(),
-            arch,
-            file_len,
-            content,
-        })
+        Ok(GgufFile { path: path.to_path_buf(), arch, file_len, content })
     }
 
     pub fn path(&self) -> &Path {
@@ -141,10 +131,8 @@ impl GgufFile {
 
     /// A fresh buffered reader on the file, for reading tensor data.
     pub fn reader(&self) -> Result<BufReader<File>> {
-        let file = File::open(&self.path).map_err(|source| LlmError::Io {
-            path: self.path.clone(),
-            source,
-        })?;
+        let file = File::open(&self.path)
+            .map_err(|source| LlmError::Io { path: self.path.clone(), source })?;
         Ok(BufReader::new(file))
     }
 
@@ -167,12 +155,10 @@ impl GgufFile {
                 detail: format!("tensor missing from a {} model", self.arch),
             });
         }
-        self.content
-            .tensor(reader, name, device)
-            .map_err(|e| LlmError::Truncated {
-                path: self.path.clone(),
-                detail: format!("tensor '{name}': {e}"),
-            })
+        self.content.tensor(reader, name, device).map_err(|e| LlmError::Truncated {
+            path: self.path.clone(),
+            detail: format!("tensor '{name}': {e}"),
+        })
     }
 
     /// The metadata key for `suffix` under this file's architecture: `arch_key("block_count")`
@@ -183,10 +169,7 @@ impl GgufFile {
 
     /// Typed access to the metadata; errors name this file and the key.
     pub fn metadata(&self) -> Metadata<'_> {
-        Metadata {
-            path: &self.path,
-            map: &self.content.metadata,
-        }
+        Metadata { path: &self.path, map: &self.content.metadata }
     }
 }
 
@@ -327,29 +310,17 @@ impl<'a> Metadata<'a> {
 }
 
 fn check_magic<R: Read>(reader: &mut R, file_len: u64, path: &Path) -> Result<()> {
-    let not_gguf = |reason: String| {
-        Err(LlmError::NotGguf {
-            path: path.to_path_buf(),
-            reason,
-        })
-    };
+    let not_gguf = |reason: String| Err(LlmError::NotGguf { path: path.to_path_buf(), reason });
     if file_len < 8 {
-        return not_gguf(format!(
-            "the file is {file_len} bytes long, shorter than a GGUF header"
-        ));
+        return not_gguf(format!("the file is {file_len} bytes long, shorter than a GGUF header"));
     }
     let mut head = [0u8; 8];
     reader
         .read_exact(&mut head)
-        .map_err(|source| LlmError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        .map_err(|source| LlmError::Io { path: path.to_path_buf(), source })?;
     if &head[..4] != GGUF_MAGIC {
-        let shown: String = head[..4]
-            .iter()
-            .map(|&b| if b.is_ascii_graphic() { b as char } else { '.' })
-            .collect();
+        let shown: String =
+            head[..4].iter().map(|&b| if b.is_ascii_graphic() { b as char } else { '.' }).collect();
         return not_gguf(format!(
             "it starts with bytes {:02x} {:02x} {:02x} {:02x} ('{shown}') instead of 'GGUF'",
             head[0], head[1], head[2], head[3]
@@ -357,9 +328,7 @@ fn check_magic<R: Read>(reader: &mut R, file_len: u64, path: &Path) -> Result<()
     }
     let version = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
     if !(1..=3).contains(&version) {
-        return not_gguf(format!(
-            "GGUF version {version} is not supported (1 to 3 are)"
-        ));
+        return not_gguf(format!("GGUF version {version} is not supported (1 to 3 are)"));
     }
     Ok(())
 }
@@ -367,12 +336,7 @@ fn check_magic<R: Read>(reader: &mut R, file_len: u64, path: &Path) -> Result<()
 /// Every tensor's bytes must lie inside the file: a cut-short download keeps a valid header but
 /// loses the tail, and would otherwise fail only when that tensor is loaded.
 fn check_tensor_extents(content: &Content, file_len: u64, path: &Path) -> Result<()> {
-    let truncated = |detail: String| {
-        Err(LlmError::Truncated {
-            path: path.to_path_buf(),
-            detail,
-        })
-    };
+    let truncated = |detail: String| Err(LlmError::Truncated { path: path.to_path_buf(), detail });
     if content.tensor_data_offset > file_len {
         return truncated(format!(
             "tensor data should start at byte {} but the file has {file_len} bytes",
@@ -393,10 +357,7 @@ fn check_tensor_extents(content: &Content, file_len: u64, path: &Path) -> Result
             ));
         }
         let size = (elems / block) as u64 * info.ggml_dtype.type_size() as u64;
-        let end = content
-            .tensor_data_offset
-            .saturating_add(info.offset)
-            .saturating_add(size);
+        let end = content.tensor_data_offset.saturating_add(info.offset).saturating_add(size);
         if end > file_len && worst.is_none_or(|(_, e)| end > e) {
             worst = Some((name, end));
         }
@@ -459,9 +420,7 @@ pub(crate) mod test_models {
     /// The path of installed model `file` under the crate's `models/`, or `None` (after printing
     /// why) when it is absent and models are not required.
     pub fn real_model(file: &str) -> Option<PathBuf> {
-        let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("models")
-            .join(file);
+        let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models").join(file);
         if p.is_file() {
             return Some(p);
         }
@@ -476,6 +435,35 @@ pub(crate) mod test_models {
             p.display()
         );
         None
+    }
+
+    /// The opened real model, shared by all tests of the binary (the header of the Qwen file
+    /// holds 300k strings; reading it once keeps the suite fast).
+    pub fn real_gguf(file: &'static str) -> Option<&'static super::GgufFile> {
+        use std::sync::OnceLock;
+        static SMOL: OnceLock<Option<super::GgufFile>> = OnceLock::new();
+        static QW: OnceLock<Option<super::GgufFile>> = OnceLock::new();
+        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
+        cell.get_or_init(|| {
+            let p = real_model(file)?;
+            Some(super::GgufFile::open(&p).expect("installed model opens"))
+        })
+        .as_ref()
+    }
+
+    /// The real model's tokenizer, built once per test binary (a build reads the whole vocabulary).
+    pub fn real_tokenizer(
+        file: &'static str,
+    ) -> Option<&'static crate::llm::tokenizer::GgufTokenizer> {
+        use crate::llm::tokenizer::GgufTokenizer;
+        use std::sync::OnceLock;
+        static SMOL: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        static QW: OnceLock<Option<GgufTokenizer>> = OnceLock::new();
+        let cell = if file == SMOLLM2 { &SMOL } else { &QW };
+        cell.get_or_init(|| {
+            Some(GgufTokenizer::from_gguf(real_gguf(file)?).expect("tokenizer builds"))
+        })
+        .as_ref()
     }
 
     pub const SMOLLM2: &str = "SmolLM2-135M-Instruct.Q4_1.gguf";
@@ -497,51 +485,26 @@ mod tests {
             write_tiny_gguf(&spec, &p).unwrap();
             let g = GgufFile::open(&p).unwrap();
             assert_eq!(g.arch(), spec.arch);
-            assert_eq!(
-                g.metadata().get_usize(&g.arch_key("block_count")).unwrap(),
-                spec.n_layer
-            );
-            assert_eq!(
-                g.metadata()
-                    .get_usize(&g.arch_key("embedding_length"))
-                    .unwrap(),
-                64
-            );
+            assert_eq!(g.metadata().get_usize(&g.arch_key("block_count")).unwrap(), spec.n_layer);
+            assert_eq!(g.metadata().get_usize(&g.arch_key("embedding_length")).unwrap(), 64);
             assert!(
                 (g.metadata().get_f32(&g.arch_key("rope.freq_base")).unwrap() - 10_000.0).abs()
                     < 1e-3
             );
+            assert_eq!(g.metadata().get_str("tokenizer.ggml.model").unwrap(), "gpt2");
             assert_eq!(
-                g.metadata().get_str("tokenizer.ggml.model").unwrap(),
-                "gpt2"
-            );
-            assert_eq!(
-                g.metadata()
-                    .get_str_array("tokenizer.ggml.tokens")
-                    .unwrap()
-                    .len(),
+                g.metadata().get_str_array("tokenizer.ggml.tokens").unwrap().len(),
                 spec.vocab_size()
             );
             assert_eq!(
-                g.metadata()
-                    .get_i64_array("tokenizer.ggml.token_type")
-                    .unwrap()
-                    .len(),
+                g.metadata().get_i64_array("tokenizer.ggml.token_type").unwrap().len(),
                 spec.vocab_size()
             );
-            assert!(!g
-                .metadata()
-                .get_bool("tokenizer.ggml.add_bos_token")
-                .unwrap());
+            assert!(!g.metadata().get_bool("tokenizer.ggml.add_bos_token").unwrap());
             assert_eq!(g.metadata().opt_u32("no.such.key").unwrap(), None);
             assert_eq!(g.has_tensor("output.weight"), spec.arch == Arch::Qwen2);
-            let q = g
-                .tensor(
-                    &mut g.reader().unwrap(),
-                    "blk.0.attn_q.weight",
-                    &Device::Cpu,
-                )
-                .unwrap();
+            let q =
+                g.tensor(&mut g.reader().unwrap(), "blk.0.attn_q.weight", &Device::Cpu).unwrap();
             assert_eq!(q.shape().dims(), &[64, 64]);
         }
     }
@@ -556,31 +519,16 @@ mod tests {
             matches!(&err, LlmError::Metadata { key, .. } if key == "llama.expert_count"),
             "{err}"
         );
-        let msg = g
-            .metadata()
-            .get_u32("tokenizer.ggml.model")
-            .unwrap_err()
-            .to_string();
+        let msg = g.metadata().get_u32("tokenizer.ggml.model").unwrap_err().to_string();
         assert!(
             msg.contains("tokenizer.ggml.model") && msg.contains("expected a non-negative integer"),
             "{msg}"
         );
         assert!(msg.contains("tiny.gguf"), "{msg}");
-        let msg = g
-            .metadata()
-            .get_f32("general.architecture")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            msg.contains("expected a float") && msg.contains("\"llama\""),
-            "{msg}"
-        );
+        let msg = g.metadata().get_f32("general.architecture").unwrap_err().to_string();
+        assert!(msg.contains("expected a float") && msg.contains("\"llama\""), "{msg}");
         let err = g
-            .tensor(
-                &mut std::io::Cursor::new(Vec::new()),
-                "blk.9.attn_q.weight",
-                &Device::Cpu,
-            )
+            .tensor(&mut std::io::Cursor::new(Vec::new()), "blk.9.attn_q.weight", &Device::Cpu)
             .unwrap_err();
         assert!(err.to_string().contains("blk.9.attn_q.weight"), "{err}");
     }
@@ -595,10 +543,7 @@ mod tests {
         let err = GgufFile::open(&p).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, LlmError::Truncated { .. }), "{msg}");
-        assert!(
-            msg.contains("bytes missing") && msg.contains("cut.gguf"),
-            "{msg}"
-        );
+        assert!(msg.contains("bytes missing") && msg.contains("cut.gguf"), "{msg}");
         // Cut in the header: the metadata cannot be read.
         std::fs::write(&p, &bytes[..200]).unwrap();
         let err = GgufFile::open(&p).unwrap_err();
@@ -652,10 +597,7 @@ mod tests {
         let bytes = gguf_with_arch(Some(Value::String("mamba".into())));
         let err = GgufFile::from_reader(&mut std::io::Cursor::new(bytes), Path::new("m.gguf"))
             .unwrap_err();
-        assert!(
-            matches!(&err, LlmError::UnsupportedArch { arch, .. } if arch == "mamba"),
-            "{err}"
-        );
+        assert!(matches!(&err, LlmError::UnsupportedArch { arch, .. } if arch == "mamba"), "{err}");
         assert!(err.to_string().contains("supported: llama, qwen2"));
         let bytes = gguf_with_arch(None);
         let err = GgufFile::from_reader(&mut std::io::Cursor::new(bytes), Path::new("m.gguf"))
@@ -673,13 +615,9 @@ mod tests {
     #[test]
     fn real_models_open() {
         for (file, arch, layers) in [(SMOLLM2, Arch::Llama, 30), (QWEN, Arch::Qwen2, 24)] {
-            let Some(p) = real_model(file) else { continue };
-            let g = GgufFile::open(&p).unwrap();
+            let Some(g) = real_gguf(file) else { continue };
             assert_eq!(g.arch(), arch);
-            assert_eq!(
-                g.metadata().get_usize(&g.arch_key("block_count")).unwrap(),
-                layers
-            );
+            assert_eq!(g.metadata().get_usize(&g.arch_key("block_count")).unwrap(), layers);
             assert_eq!(g.has_tensor("output.weight"), arch == Arch::Qwen2);
         }
     }

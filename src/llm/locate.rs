@@ -53,11 +53,7 @@ pub const DEFAULT_MODEL: &str = "smollm2";
 pub enum ModelSpec {
     Path(PathBuf),
     Installed(&'static InstalledModel),
-    HfHub {
-        repo: String,
-        revision: Option<String>,
-        file: String,
-    },
+    HfHub { repo: String, revision: Option<String>, file: String },
 }
 
 impl ModelSpec {
@@ -68,10 +64,7 @@ impl ModelSpec {
         if spec.is_empty() {
             return Err(not_found("an empty model name".into(), usage_hint()));
         }
-        if let Some(m) = INSTALLED_MODELS
-            .iter()
-            .find(|m| m.name.eq_ignore_ascii_case(spec))
-        {
+        if let Some(m) = INSTALLED_MODELS.iter().find(|m| m.name.eq_ignore_ascii_case(spec)) {
             return Ok(ModelSpec::Installed(m));
         }
         if Path::new(spec).exists() {
@@ -99,11 +92,7 @@ fn parse_hf_id(spec: &str) -> Option<ModelSpec> {
         && !file.starts_with('/')
         && !file.split('/').any(|part| part.is_empty() || part == "..");
     if plain(owner) && plain(name) && file_ok {
-        Some(ModelSpec::HfHub {
-            repo: repo.to_string(),
-            revision,
-            file: file.to_string(),
-        })
+        Some(ModelSpec::HfHub { repo: repo.to_string(), revision, file: file.to_string() })
     } else {
         None
     }
@@ -123,11 +112,7 @@ pub struct Locator {
 impl Locator {
     /// The locations given by the environment (see the module docs).
     pub fn from_env() -> Self {
-        Self::from_vars(|k| {
-            std::env::var_os(k)
-                .filter(|v| !v.is_empty())
-                .map(PathBuf::from)
-        })
+        Self::from_vars(|k| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from))
     }
 
     /// As [`Locator::from_env`], reading variables through `var` (tests pass their own).
@@ -150,20 +135,12 @@ impl Locator {
         let hf_cache = var("HF_HUB_CACHE")
             .or_else(|| var("HF_HOME").map(|h| h.join("hub")))
             .or_else(|| var("HOME").map(|h| h.join(".cache").join("huggingface").join("hub")));
-        Locator {
-            models_dirs,
-            models_dir_from_env,
-            hf_cache,
-        }
+        Locator { models_dirs, models_dir_from_env, hf_cache }
     }
 
     /// Explicit locations: `models_dirs` searched in order, `hf_cache` the hub cache folder.
     pub fn new(models_dirs: Vec<PathBuf>, hf_cache: Option<PathBuf>) -> Self {
-        Locator {
-            models_dirs,
-            models_dir_from_env: false,
-            hf_cache,
-        }
+        Locator { models_dirs, models_dir_from_env: false, hf_cache }
     }
 
     pub fn models_dirs(&self) -> &[PathBuf] {
@@ -183,11 +160,9 @@ impl Locator {
         match spec {
             ModelSpec::Path(p) => self.resolve_path(p),
             ModelSpec::Installed(m) => self.resolve_installed(m),
-            ModelSpec::HfHub {
-                repo,
-                revision,
-                file,
-            } => self.resolve_hf(repo, revision.as_deref(), file),
+            ModelSpec::HfHub { repo, revision, file } => {
+                self.resolve_hf(repo, revision.as_deref(), file)
+            }
         }
     }
 
@@ -201,10 +176,7 @@ impl Locator {
             format!("no model file at {}", p.display())
         };
         // A path naming an installed model's file gets that model's install command.
-        let hint = match p
-            .file_name()
-            .and_then(|f| INSTALLED_MODELS.iter().find(|m| f == m.file))
-        {
+        let hint = match p.file_name().and_then(|f| INSTALLED_MODELS.iter().find(|m| f == m.file)) {
             Some(m) => self.install_hint(m),
             None => usage_hint(),
         };
@@ -212,19 +184,11 @@ impl Locator {
     }
 
     fn resolve_installed(&self, m: &InstalledModel) -> Result<PathBuf> {
-        if let Some(p) = self
-            .models_dirs
-            .iter()
-            .map(|d| d.join(m.file))
-            .find(|p| p.is_file())
-        {
+        if let Some(p) = self.models_dirs.iter().map(|d| d.join(m.file)).find(|p| p.is_file()) {
             return Ok(p);
         }
-        let places: Vec<String> = self
-            .models_dirs
-            .iter()
-            .map(|d| d.display().to_string())
-            .collect();
+        let places: Vec<String> =
+            self.models_dirs.iter().map(|d| d.display().to_string()).collect();
         Err(not_found(
             format!(
                 "model '{}' ({}) is not installed: looked in {}",
@@ -268,21 +232,16 @@ impl Locator {
         let hf_repo =
             hf_hub::Repo::with_revision(repo.to_string(), hf_hub::RepoType::Model, rev.to_string());
         let repo_dir = cache.join(hf_repo.folder_name());
-        let found = hf_hub::Cache::new(cache.clone())
-            .repo(hf_repo)
-            .get(file)
-            .or_else(|| {
-                // A commit hash has no ref file: its snapshot folder is named by the hash itself.
-                let is_commit = rev.len() == 40 && rev.bytes().all(|b| b.is_ascii_hexdigit());
-                let p = repo_dir.join("snapshots").join(rev).join(file);
-                (is_commit && p.exists()).then_some(p)
-            });
+        let found = hf_hub::Cache::new(cache.clone()).repo(hf_repo).get(file).or_else(|| {
+            // A commit hash has no ref file: its snapshot folder is named by the hash itself.
+            let is_commit = rev.len() == 40 && rev.bytes().all(|b| b.is_ascii_hexdigit());
+            let p = repo_dir.join("snapshots").join(rev).join(file);
+            (is_commit && p.exists()).then_some(p)
+        });
         match found {
             Some(p) if p.is_file() => Ok(p),
             _ => {
-                let rev_arg = revision
-                    .map(|r| format!(" --revision {r}"))
-                    .unwrap_or_default();
+                let rev_arg = revision.map(|r| format!(" --revision {r}")).unwrap_or_default();
                 Err(not_found(
                     format!("Hugging Face model {id} is not in the local cache {}", cache.display()),
                     format!(
@@ -305,10 +264,8 @@ pub fn resolve_model(spec: &str) -> Result<PathBuf> {
 }
 
 fn usage_hint() -> String {
-    let names: Vec<String> = INSTALLED_MODELS
-        .iter()
-        .map(|m| format!("{} (`{}`)", m.name, m.install))
-        .collect();
+    let names: Vec<String> =
+        INSTALLED_MODELS.iter().map(|m| format!("{} (`{}`)", m.name, m.install)).collect();
     format!(
         "give a path to a .gguf file, an installed model name: {}, or a Hugging Face id \
          owner/repo:file.gguf already in the local cache",
@@ -359,23 +316,10 @@ mod tests {
                 file: "sub/q.gguf".into()
             }
         );
-        for path in [
-            "models/x.gguf",
-            "/abs/x.gguf",
-            "a/b/c:d.gguf",
-            "o/r:../x.gguf",
-            "o/r:x.bin",
-        ] {
-            assert_eq!(
-                ModelSpec::parse(path).unwrap(),
-                ModelSpec::Path(path.into()),
-                "{path}"
-            );
+        for path in ["models/x.gguf", "/abs/x.gguf", "a/b/c:d.gguf", "o/r:../x.gguf", "o/r:x.bin"] {
+            assert_eq!(ModelSpec::parse(path).unwrap(), ModelSpec::Path(path.into()), "{path}");
         }
-        assert!(matches!(
-            ModelSpec::parse("  "),
-            Err(LlmError::ModelNotFound { .. })
-        ));
+        assert!(matches!(ModelSpec::parse("  "), Err(LlmError::ModelNotFound { .. })));
     }
 
     #[test]
@@ -395,15 +339,9 @@ mod tests {
         let (a, b) = (dir.path().join("a"), dir.path().join("b"));
         touch(&b.join(INSTALLED_MODELS[0].file));
         let loc = Locator::new(vec![a.clone(), b.clone()], None);
-        assert_eq!(
-            loc.resolve("smollm2").unwrap(),
-            b.join(INSTALLED_MODELS[0].file)
-        );
+        assert_eq!(loc.resolve("smollm2").unwrap(), b.join(INSTALLED_MODELS[0].file));
         touch(&a.join(INSTALLED_MODELS[0].file));
-        assert_eq!(
-            loc.resolve("smollm2").unwrap(),
-            a.join(INSTALLED_MODELS[0].file)
-        );
+        assert_eq!(loc.resolve("smollm2").unwrap(), a.join(INSTALLED_MODELS[0].file));
     }
 
     #[test]
@@ -419,30 +357,22 @@ mod tests {
         let msg = loc.resolve("qwen2.5-coder-0.5b").unwrap_err().to_string();
         assert!(msg.contains("`models/install.sh --large`"), "{msg}");
         // A path to an installed model's file that is not there gets the same hint.
-        let msg = loc
-            .resolve("/nowhere/SmolLM2-135M-Instruct.Q4_1.gguf")
-            .unwrap_err()
-            .to_string();
+        let msg = loc.resolve("/nowhere/SmolLM2-135M-Instruct.Q4_1.gguf").unwrap_err().to_string();
         assert!(
             msg.contains("no model file at /nowhere/") && msg.contains("models/install.sh"),
             "{msg}"
         );
         let msg = loc.resolve("/nowhere/other.gguf").unwrap_err().to_string();
         assert!(msg.contains("installed model name: smollm2"), "{msg}");
-        let msg = loc
-            .resolve(dir.path().to_str().unwrap())
-            .unwrap_err()
-            .to_string();
+        let msg = loc.resolve(dir.path().to_str().unwrap()).unwrap_err().to_string();
         assert!(msg.contains("is a folder"), "{msg}");
     }
 
     #[test]
     fn environment_variables_choose_the_folders() {
         let env = |pairs: &[(&str, &str)]| {
-            let m: BTreeMap<String, PathBuf> = pairs
-                .iter()
-                .map(|(k, v)| (k.to_string(), PathBuf::from(v)))
-                .collect();
+            let m: BTreeMap<String, PathBuf> =
+                pairs.iter().map(|(k, v)| (k.to_string(), PathBuf::from(v))).collect();
             Locator::from_vars(move |k| m.get(k).cloned())
         };
         let loc = env(&[
@@ -484,31 +414,18 @@ mod tests {
         touch(&file);
         let loc = Locator::new(vec![], Some(cache.clone()));
         assert_eq!(loc.resolve("owner/repo:m.Q4_0.gguf").unwrap(), file);
-        assert_eq!(
-            loc.resolve(&format!("owner/repo@{commit}:m.Q4_0.gguf"))
-                .unwrap(),
-            file
-        );
+        assert_eq!(loc.resolve(&format!("owner/repo@{commit}:m.Q4_0.gguf")).unwrap(), file);
         let err = loc.resolve("owner/repo:other.gguf").unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, LlmError::ModelNotFound { .. }));
-        assert!(
-            msg.contains("huggingface-cli download owner/repo other.gguf"),
-            "{msg}"
-        );
+        assert!(msg.contains("huggingface-cli download owner/repo other.gguf"), "{msg}");
         assert!(
             msg.contains("models--owner--repo") && msg.contains(&cache.display().to_string()),
             "{msg}"
         );
-        let msg = loc
-            .resolve("owner/repo@v2:m.Q4_0.gguf")
-            .unwrap_err()
-            .to_string();
+        let msg = loc.resolve("owner/repo@v2:m.Q4_0.gguf").unwrap_err().to_string();
         assert!(msg.contains("--revision v2"), "{msg}");
-        let msg = Locator::new(vec![], None)
-            .resolve("owner/repo:m.gguf")
-            .unwrap_err()
-            .to_string();
+        let msg = Locator::new(vec![], None).resolve("owner/repo:m.gguf").unwrap_err().to_string();
         assert!(msg.contains("HF_HUB_CACHE"), "{msg}");
     }
 

@@ -1,4 +1,12 @@
-//! The local LLM runtime (in progress: issue 3).
+//! The local LLM runtime: a quantised GGUF model on the CPU, decoding under a grammar.
+//!
+//! The flow, one module per step: [`locate`] finds the file, [`gguf`] validates it and reads its
+//! metadata, [`tokenizer`] and [`chat`] are rebuilt from that metadata (no tokenizer.json ships with
+//! these models), [`model`] is the forward pass with an owned KV cache, [`constraint`] turns a Lark
+//! grammar into a token mask per step (llguidance), [`sample`] chooses a token, and [`engine`] runs the
+//! loop with prompt-prefix reuse behind the one trait the planner sees, [`engine::Generate`].
+//! [`tiny`] writes random-weight models of each architecture for tests and benches.
+
 pub mod chat;
 pub mod constraint;
 pub mod engine;
@@ -9,4 +17,5 @@ pub mod model;
 pub mod sample;
 pub mod tiny;
 pub mod tokenizer;
+
 pub use error::{LlmError, Result};

@@ -16,6 +16,7 @@ use rand::{Rng, SeedableRng};
 
 use super::error::{LlmError, Result};
 use super::gguf::Arch;
+use super::tokenizer::byte_to_unicode;
 
 /// The shape and initialisation of a tiny model. Build one with [`TinySpec::llama`],
 /// [`TinySpec::qwen2`] or [`TinySpec::new`], then adjust fields.
@@ -106,25 +107,22 @@ impl TinySpec {
         if self.n_layer == 0 || self.n_head == 0 || self.n_head_kv == 0 {
             return bad("n_layer, n_head and n_head_kv must be at least 1".into());
         }
-        if self.n_embd % self.n_head != 0 {
+        if !self.n_embd.is_multiple_of(self.n_head) {
             return bad(format!(
                 "n_embd {} is not a multiple of n_head {}",
                 self.n_embd, self.n_head
             ));
         }
-        if self.n_head % self.n_head_kv != 0 {
+        if !self.n_head.is_multiple_of(self.n_head_kv) {
             return bad(format!(
                 "n_head {} is not a multiple of n_head_kv {}",
                 self.n_head, self.n_head_kv
             ));
         }
-        if self.head_dim() % 2 != 0 {
-            return bad(format!(
-                "head dim {} must be even for rope",
-                self.head_dim()
-            ));
+        if !self.head_dim().is_multiple_of(2) {
+            return bad(format!("head dim {} must be even for rope", self.head_dim()));
         }
-        if self.n_embd % max_block != 0 || self.n_ff % max_block != 0 {
+        if !self.n_embd.is_multiple_of(max_block) || !self.n_ff.is_multiple_of(max_block) {
             return bad(format!(
                 "n_embd {} and n_ff {} must be multiples of the quant block size {max_block}",
                 self.n_embd, self.n_ff
@@ -218,26 +216,6 @@ const MERGE_WORDS: &[&str] = &[
     "Plan",
 ];
 
-/// GPT-2's reversible byte-to-symbol map: printable Latin-1 bytes stand for themselves, the
-/// others are shifted to code points from 256 upwards, so every byte is a visible character.
-pub fn byte_to_unicode() -> [char; 256] {
-    let mut out = ['\0'; 256];
-    let mut shifted = 0u32;
-    for b in 0u32..256 {
-        let printable =
-            (0x21..=0x7e).contains(&b) || (0xa1..=0xac).contains(&b) || (0xae..=0xff).contains(&b);
-        let cp = if printable {
-            b
-        } else {
-            shifted += 1;
-            255 + shifted
-        };
-        // All code points here are below 0x200, valid scalar values.
-        out[b as usize] = char::from_u32(cp).unwrap_or('\u{fffd}');
-    }
-    out
-}
-
 /// The tiny vocabulary of `arch`. The llama vocabulary puts the control tokens first (as SmolLM2:
 /// `<|endoftext|>` 0, `<|im_start|>` 1 = bos, `<|im_end|>` 2 = eos); the qwen2 one puts them last
 /// (as Qwen2.5: bos = pad = `<|endoftext|>`, eos = `<|im_end|>`), so both layouts are exercised.
@@ -286,15 +264,7 @@ pub fn tiny_vocab(arch: Arch) -> TinyVocab {
     } else {
         (first_special, first_special + 2, first_special, "qwen2")
     };
-    TinyVocab {
-        tokens,
-        token_type,
-        merges,
-        bos_id,
-        eos_id,
-        pad_id,
-        pre,
-    }
+    TinyVocab { tokens, token_type, merges, bos_id, eos_id, pad_id, pre }
 }
 
 /// Standard normal samples by Box-Muller (no extra dependency for a distribution crate).
@@ -317,8 +287,11 @@ fn qtensor(data: Vec<f32>, shape: &[usize], dtype: GgmlDType) -> Result<QTensor>
     Ok(QTensor::quantize(&t, dtype)?)
 }
 
+/// Metadata entries and named tensors, in file order.
+type TinyParts = (Vec<(String, Value)>, Vec<(String, QTensor)>);
+
 /// All metadata and tensors of the tiny model, in file order.
-fn build(spec: &TinySpec) -> Result<(Vec<(String, Value)>, Vec<(String, QTensor)>)> {
+fn build(spec: &TinySpec) -> Result<TinyParts> {
     spec.validate()?;
     let vocab = tiny_vocab(spec.arch);
     let n_vocab = vocab.tokens.len();
@@ -326,43 +299,22 @@ fn build(spec: &TinySpec) -> Result<(Vec<(String, Value)>, Vec<(String, QTensor)
     let u32v = |x: usize| Value::U32(x as u32);
     let mut md: Vec<(String, Value)> = vec![
         ("general.architecture".into(), Value::String(arch.into())),
-        (
-            "general.name".into(),
-            Value::String(format!("step-tiny-{arch}")),
-        ),
+        ("general.name".into(), Value::String(format!("step-tiny-{arch}"))),
         (format!("{arch}.block_count"), u32v(spec.n_layer)),
         (format!("{arch}.context_length"), u32v(spec.context_length)),
         (format!("{arch}.embedding_length"), u32v(spec.n_embd)),
         (format!("{arch}.feed_forward_length"), u32v(spec.n_ff)),
         (format!("{arch}.attention.head_count"), u32v(spec.n_head)),
-        (
-            format!("{arch}.attention.head_count_kv"),
-            u32v(spec.n_head_kv),
-        ),
-        (
-            format!("{arch}.rope.freq_base"),
-            Value::F32(spec.rope_freq_base),
-        ),
-        (
-            format!("{arch}.attention.layer_norm_rms_epsilon"),
-            Value::F32(spec.rms_norm_eps),
-        ),
-        (
-            format!("{arch}.rope.dimension_count"),
-            u32v(spec.head_dim()),
-        ),
+        (format!("{arch}.attention.head_count_kv"), u32v(spec.n_head_kv)),
+        (format!("{arch}.rope.freq_base"), Value::F32(spec.rope_freq_base)),
+        (format!("{arch}.attention.layer_norm_rms_epsilon"), Value::F32(spec.rms_norm_eps)),
+        (format!("{arch}.rope.dimension_count"), u32v(spec.head_dim())),
         (format!("{arch}.vocab_size"), u32v(n_vocab)),
         ("tokenizer.ggml.model".into(), Value::String("gpt2".into())),
         ("tokenizer.ggml.pre".into(), Value::String(vocab.pre.into())),
         (
             "tokenizer.ggml.tokens".into(),
-            Value::Array(
-                vocab
-                    .tokens
-                    .iter()
-                    .map(|t| Value::String(t.clone()))
-                    .collect(),
-            ),
+            Value::Array(vocab.tokens.iter().map(|t| Value::String(t.clone())).collect()),
         ),
         (
             "tokenizer.ggml.token_type".into(),
@@ -370,31 +322,13 @@ fn build(spec: &TinySpec) -> Result<(Vec<(String, Value)>, Vec<(String, QTensor)
         ),
         (
             "tokenizer.ggml.merges".into(),
-            Value::Array(
-                vocab
-                    .merges
-                    .iter()
-                    .map(|m| Value::String(m.clone()))
-                    .collect(),
-            ),
+            Value::Array(vocab.merges.iter().map(|m| Value::String(m.clone())).collect()),
         ),
-        (
-            "tokenizer.ggml.bos_token_id".into(),
-            Value::U32(vocab.bos_id),
-        ),
-        (
-            "tokenizer.ggml.eos_token_id".into(),
-            Value::U32(vocab.eos_id),
-        ),
-        (
-            "tokenizer.ggml.padding_token_id".into(),
-            Value::U32(vocab.pad_id),
-        ),
+        ("tokenizer.ggml.bos_token_id".into(), Value::U32(vocab.bos_id)),
+        ("tokenizer.ggml.eos_token_id".into(), Value::U32(vocab.eos_id)),
+        ("tokenizer.ggml.padding_token_id".into(), Value::U32(vocab.pad_id)),
         ("tokenizer.ggml.add_bos_token".into(), Value::Bool(false)),
-        (
-            "tokenizer.chat_template".into(),
-            Value::String(TINY_CHAT_TEMPLATE.into()),
-        ),
+        ("tokenizer.chat_template".into(), Value::String(TINY_CHAT_TEMPLATE.into())),
     ];
     if spec.arch == Arch::Llama {
         md.push(("tokenizer.ggml.unknown_token_id".into(), Value::U32(0)));
@@ -416,57 +350,30 @@ fn build(spec: &TinySpec) -> Result<(Vec<(String, Value)>, Vec<(String, QTensor)
     };
     let bias = |rng: &mut StdRng, n: usize| qtensor(randn(rng, n, 0.1), &[n], GgmlDType::F32);
 
-    let embd = qtensor(
-        randn(&mut rng, n_vocab * d, spec.embd_std),
-        &[n_vocab, d],
-        spec.embd_dtype,
-    )?;
+    let embd =
+        qtensor(randn(&mut rng, n_vocab * d, spec.embd_std), &[n_vocab, d], spec.embd_dtype)?;
     tensors.push(("token_embd.weight".into(), embd));
     for i in 0..spec.n_layer {
         let p = format!("blk.{i}");
         tensors.push((format!("{p}.attn_norm.weight"), norm(&mut rng, d)?));
-        tensors.push((
-            format!("{p}.attn_q.weight"),
-            matrix(&mut rng, d, d, spec.attn_dtype)?,
-        ));
-        tensors.push((
-            format!("{p}.attn_k.weight"),
-            matrix(&mut rng, kv, d, spec.attn_dtype)?,
-        ));
-        tensors.push((
-            format!("{p}.attn_v.weight"),
-            matrix(&mut rng, kv, d, spec.attn_dtype)?,
-        ));
+        tensors.push((format!("{p}.attn_q.weight"), matrix(&mut rng, d, d, spec.attn_dtype)?));
+        tensors.push((format!("{p}.attn_k.weight"), matrix(&mut rng, kv, d, spec.attn_dtype)?));
+        tensors.push((format!("{p}.attn_v.weight"), matrix(&mut rng, kv, d, spec.attn_dtype)?));
         if spec.arch == Arch::Qwen2 {
             tensors.push((format!("{p}.attn_q.bias"), bias(&mut rng, d)?));
             tensors.push((format!("{p}.attn_k.bias"), bias(&mut rng, kv)?));
             tensors.push((format!("{p}.attn_v.bias"), bias(&mut rng, kv)?));
         }
-        tensors.push((
-            format!("{p}.attn_output.weight"),
-            matrix(&mut rng, d, d, spec.attn_dtype)?,
-        ));
+        tensors.push((format!("{p}.attn_output.weight"), matrix(&mut rng, d, d, spec.attn_dtype)?));
         tensors.push((format!("{p}.ffn_norm.weight"), norm(&mut rng, d)?));
-        tensors.push((
-            format!("{p}.ffn_gate.weight"),
-            matrix(&mut rng, ff, d, spec.ffn_dtype)?,
-        ));
-        tensors.push((
-            format!("{p}.ffn_up.weight"),
-            matrix(&mut rng, ff, d, spec.ffn_dtype)?,
-        ));
-        tensors.push((
-            format!("{p}.ffn_down.weight"),
-            matrix(&mut rng, d, ff, spec.ffn_dtype)?,
-        ));
+        tensors.push((format!("{p}.ffn_gate.weight"), matrix(&mut rng, ff, d, spec.ffn_dtype)?));
+        tensors.push((format!("{p}.ffn_up.weight"), matrix(&mut rng, ff, d, spec.ffn_dtype)?));
+        tensors.push((format!("{p}.ffn_down.weight"), matrix(&mut rng, d, ff, spec.ffn_dtype)?));
     }
     tensors.push(("output_norm.weight".into(), norm(&mut rng, d)?));
     if spec.arch == Arch::Qwen2 {
-        let out = qtensor(
-            randn(&mut rng, n_vocab * d, spec.embd_std),
-            &[n_vocab, d],
-            spec.embd_dtype,
-        )?;
+        let out =
+            qtensor(randn(&mut rng, n_vocab * d, spec.embd_std), &[n_vocab, d], spec.embd_dtype)?;
         tensors.push(("output.weight".into(), out));
     }
     Ok((md, tensors))
@@ -490,10 +397,7 @@ pub fn tiny_gguf_bytes(spec: &TinySpec) -> Result<Vec<u8>> {
 
 /// Writes the tiny model of `spec` to `path` (created or replaced).
 pub fn write_tiny_gguf(spec: &TinySpec, path: &Path) -> Result<()> {
-    let io_err = |source| LlmError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
+    let io_err = |source| LlmError::Io { path: path.to_path_buf(), source };
     let bytes = tiny_gguf_bytes(spec)?;
     let mut f = std::fs::File::create(path).map_err(io_err)?;
     f.write_all(&bytes).map_err(io_err)?;
@@ -514,17 +418,6 @@ mod tests {
     }
 
     #[test]
-    fn byte_map_is_a_bijection_onto_visible_chars() {
-        let m = byte_to_unicode();
-        let set: std::collections::BTreeSet<char> = m.iter().copied().collect();
-        assert_eq!(set.len(), 256);
-        assert!(m.iter().all(|c| !c.is_whitespace() && !c.is_control()));
-        assert_eq!(m[b' ' as usize], 'Ġ');
-        assert_eq!(m[b'\n' as usize], 'Ċ');
-        assert_eq!(m[b'A' as usize], 'A');
-    }
-
-    #[test]
     fn vocab_has_merged_words_and_specials() {
         for arch in [Arch::Llama, Arch::Qwen2] {
             let v = tiny_vocab(arch);
@@ -532,11 +425,7 @@ mod tests {
             for w in ["WALK", "GRAB", "Ġ<", ">Ġ(", "apple", "fridge", "ĊĊ"] {
                 assert!(v.tokens.iter().any(|t| t == w), "{arch}: missing token {w}");
             }
-            assert!(
-                v.merges.len() >= 40,
-                "{arch}: only {} merges",
-                v.merges.len()
-            );
+            assert!(v.merges.len() >= 40, "{arch}: only {} merges", v.merges.len());
             // Every merge joins two existing tokens into a token that exists.
             for m in &v.merges {
                 let (a, b) = m.split_once(' ').expect("merge has a space");
@@ -553,53 +442,30 @@ mod tests {
     fn tiny_models_read_back_with_llama_cpp_names() {
         for spec in [TinySpec::llama(), TinySpec::qwen2()] {
             let (c, mut cur) = read(&spec);
-            let arch = c.metadata["general.architecture"]
-                .to_string()
-                .expect("arch");
+            let arch = c.metadata["general.architecture"].to_string().expect("arch");
             assert_eq!(arch, spec.arch.gguf_name());
-            let n_layer = c.metadata[&format!("{arch}.block_count")]
-                .to_u32()
-                .expect("u32");
+            let n_layer = c.metadata[&format!("{arch}.block_count")].to_u32().expect("u32");
             assert_eq!(n_layer as usize, spec.n_layer);
             assert!(c.metadata.contains_key("tokenizer.chat_template"));
             let emb = &c.tensor_infos["token_embd.weight"];
             assert_eq!(emb.shape.dims(), &[spec.vocab_size(), spec.n_embd]);
             assert_eq!(emb.ggml_dtype, GgmlDType::Q8_0);
-            assert_eq!(
-                c.tensor_infos["blk.1.ffn_down.weight"].ggml_dtype,
-                GgmlDType::Q4_1
-            );
-            assert_eq!(
-                c.tensor_infos["blk.0.attn_k.weight"].shape.dims(),
-                &[32, 64]
-            );
-            assert_eq!(
-                c.tensor_infos["output_norm.weight"].ggml_dtype,
-                GgmlDType::F32
-            );
+            assert_eq!(c.tensor_infos["blk.1.ffn_down.weight"].ggml_dtype, GgmlDType::Q4_1);
+            assert_eq!(c.tensor_infos["blk.0.attn_k.weight"].shape.dims(), &[32, 64]);
+            assert_eq!(c.tensor_infos["output_norm.weight"].ggml_dtype, GgmlDType::F32);
             let has_output = c.tensor_infos.contains_key("output.weight");
             let has_bias = c.tensor_infos.contains_key("blk.0.attn_q.bias");
             assert_eq!(has_output, spec.arch == Arch::Qwen2);
             assert_eq!(has_bias, spec.arch == Arch::Qwen2);
             // Tensor data is readable and dequantises to finite, non-constant values.
-            let q = c
-                .tensor(&mut cur, "blk.0.ffn_up.weight", &Device::Cpu)
-                .expect("tensor");
-            let v: Vec<f32> = q
-                .dequantize(&Device::Cpu)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1()
-                .unwrap();
+            let q = c.tensor(&mut cur, "blk.0.ffn_up.weight", &Device::Cpu).expect("tensor");
+            let v: Vec<f32> =
+                q.dequantize(&Device::Cpu).unwrap().flatten_all().unwrap().to_vec1().unwrap();
             assert!(v.iter().all(|x| x.is_finite()));
             let mean = v.iter().sum::<f32>() / v.len() as f32;
             let var = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f32>() / v.len() as f32;
             let want = 1.0 / (spec.n_embd as f32); // (gain / sqrt(fan_in))^2
-            assert!(
-                var > 0.5 * want && var < 2.0 * want,
-                "variance {var}, want ~{want}"
-            );
+            assert!(var > 0.5 * want && var < 2.0 * want, "variance {var}, want ~{want}");
         }
     }
 
