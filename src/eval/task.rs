@@ -10,7 +10,7 @@
 //! a user's own goal) they are the objects the goal and the gold plan name, the character, and the
 //! rooms all of these are in.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -46,31 +46,82 @@ pub struct Task {
     pub origin: TaskOrigin,
 }
 
-/// A node with its property and state lists sorted, for comparing nodes as EAI does.
-fn normalised(n: &Node) -> Node {
-    let mut n = n.clone();
-    n.properties.sort();
-    n.states.sort();
-    n
+/// Whether two lists hold the same strings with the same multiplicities (EAI compares nodes with
+/// their property and state lists sorted).
+fn same_multiset(a: &[String], b: &[String]) -> bool {
+    if a == b {
+        return true;
+    }
+    if a.len() != b.len() {
+        return false;
+    }
+    let (mut x, mut y) = (a.to_vec(), b.to_vec());
+    x.sort_unstable();
+    y.sort_unstable();
+    x == y
+}
+
+fn same_node(a: &Node, b: &Node) -> bool {
+    a.id == b.id
+        && a.class_name == b.class_name
+        && a.category == b.category
+        && a.prefab_name == b.prefab_name
+        && a.bounding_box == b.bounding_box
+        && a.obj_transform == b.obj_transform
+        && same_multiset(&a.properties, &b.properties)
+        && same_multiset(&a.states, &b.states)
 }
 
 /// EAI's relevant objects: ids of nodes that differ between the two graphs (or are in one only), and
 /// both ends of every edge that is in one graph only. Ascending.
 pub fn relevant_by_diff(init: &Graph, fin: &Graph) -> Vec<u32> {
-    let a: BTreeMap<u32, Node> = init.nodes.iter().map(|n| (n.id, normalised(n))).collect();
-    let b: BTreeMap<u32, Node> = fin.nodes.iter().map(|n| (n.id, normalised(n))).collect();
+    let b: HashMap<u32, &Node> = fin.nodes.iter().map(|n| (n.id, n)).collect();
+    let a_ids: HashSet<u32> = init.nodes.iter().map(|n| n.id).collect();
     let mut ids = BTreeSet::new();
-    for (id, n) in &a {
-        if b.get(id) != Some(n) {
-            ids.insert(*id);
+    for n in &init.nodes {
+        if !b.get(&n.id).is_some_and(|m| same_node(n, m)) {
+            ids.insert(n.id);
         }
     }
-    ids.extend(b.keys().filter(|id| !a.contains_key(id)));
-    let ea: BTreeSet<_> = init.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
-    let eb: BTreeSet<_> = fin.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
-    for &(f, _, t) in ea.symmetric_difference(&eb) {
-        ids.insert(f);
-        ids.insert(t);
+    ids.extend(fin.nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id)));
+    // Edges as sorted sets, then one merge pass for the symmetric difference.
+    fn sorted(g: &Graph) -> Vec<(u32, &str, u32)> {
+        let mut v: Vec<(u32, &str, u32)> = g.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+    let (ea, eb) = (sorted(init), sorted(fin));
+    let (mut i, mut j) = (0, 0);
+    while i < ea.len() || j < eb.len() {
+        let odd = match (ea.get(i), eb.get(j)) {
+            (Some(x), Some(y)) if x == y => {
+                i += 1;
+                j += 1;
+                None
+            }
+            (Some(x), Some(y)) if x < y => {
+                i += 1;
+                Some(*x)
+            }
+            (Some(_), Some(y)) => {
+                j += 1;
+                Some(*y)
+            }
+            (Some(x), None) => {
+                i += 1;
+                Some(*x)
+            }
+            (None, Some(y)) => {
+                j += 1;
+                Some(*y)
+            }
+            (None, None) => None,
+        };
+        if let Some((f, _, t)) = odd {
+            ids.insert(f);
+            ids.insert(t);
+        }
     }
     ids.into_iter().collect()
 }
