@@ -155,7 +155,8 @@ mod diff {
                     json!([n.id, s])
                 })
                 .collect();
-            results.push(json!({"codes": codes, "edges": edges, "states": states}));
+            let char_close = w.related(w.character(), crate::world::Relation::Close);
+            results.push(json!({"codes": codes, "edges": edges, "states": states, "char_close": char_close}));
         }
         std::fs::write(out, serde_json::to_string(&results).unwrap()).unwrap();
     }
