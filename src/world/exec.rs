@@ -321,17 +321,17 @@ impl World {
         if self.has_ix(c, Relation::Close, node) {
             return true;
         }
-        self.from_ix(c, Relation::Close).any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
+        self.targets(c, Relation::Close).any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
     }
 
     /// INSIDE something (not a room) that is CLOSED.
     fn inside_closed(&self, node: Ix) -> Option<Ix> {
-        self.from_ix(node, Relation::Inside).find(|&x| !self.is_room_ix(x) && self.states_ix(x).contains(State::Closed))
+        self.targets(node, Relation::Inside).find(|&x| !self.is_room_ix(x) && self.states_ix(x).contains(State::Closed))
     }
 
     fn free_hand(&self) -> Option<Relation> {
         let c = self.char_ix();
-        HANDS.iter().copied().find(|&h| self.from_ix(c, h).next().is_none())
+        HANDS.iter().copied().find(|&h| self.targets(c, h).next().is_none())
     }
 
     fn holding_hand(&self, node: Ix) -> Option<Relation> {
@@ -341,7 +341,7 @@ impl World {
 
     fn is_facing(&self, node: Ix) -> bool {
         let c = self.char_ix();
-        self.has_ix(c, Relation::Facing, node) || self.from_ix(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
+        self.has_ix(c, Relation::Facing, node) || self.targets(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
     }
 
     fn lbl(&self, ix: Ix) -> String {
@@ -426,7 +426,7 @@ impl World {
         };
         // Doors are never in the way: VirtualHome's closed-door check is disabled in EAI's executor.
         let old_room = self.room_ix(c);
-        let held: Vec<Ix> = HANDS.iter().flat_map(|&h| self.from_ix(c, h)).collect();
+        let held: Vec<Ix> = HANDS.iter().flat_map(|&h| self.targets(c, h)).collect();
         let mut ops = vec![Op::RemoveAll(c, WALK_CLEARS, true), Op::Add(c, Relation::Inside, room)];
         if room != node {
             ops.push(Op::CloseToContainersOf(c, node));
@@ -481,9 +481,9 @@ impl World {
                 _ => 1,
             }
         };
-        let n = self.to_ix(node, Relation::On).count();
+        let n = self.sources(node, Relation::On).count();
         if n >= max {
-            let on: Vec<String> = self.to_ix(node, Relation::On).take(3).map(|x| self.lbl(x)).collect();
+            let on: Vec<String> = self.sources(node, Relation::On).take(3).map(|x| self.lbl(x)).collect();
             return Err(Fail::new(
                 MissingStep,
                 format!("{} is occupied ({} on it); choose another place", self.lbl(node), on.join(", ")),
@@ -546,7 +546,7 @@ impl World {
         // set of ids, whose order follows `id & mask` for a table sized by the set's length; we take
         // the same order, so that gold programs end in the same state (measured: see world-status).
         let from = [Relation::On, Relation::Inside, Relation::Close].into_iter().find_map(|r| {
-            let ids: Vec<Ix> = self.from_ix(node, r).collect();
+            let ids: Vec<Ix> = self.targets(node, r).collect();
             let mask = py_set_mask(ids.len());
             ids.into_iter()
                 .filter(|&x| !self.is_room_ix(x))
@@ -852,7 +852,7 @@ impl World {
         self.need_prop(node, Property::Eatable, "is not food")?;
         self.need_prop(node, Property::Cuttable, "cannot be cut")?;
         let c = self.char_ix();
-        let has_knife = HANDS.iter().flat_map(|&h| self.from_ix(c, h)).any(|x| self.class_ix(x).contains("knife"));
+        let has_knife = HANDS.iter().flat_map(|&h| self.targets(c, h)).any(|x| self.class_ix(x).contains("knife"));
         if !has_knife {
             return Err(Fail::new(MissingStep, "the robot is not holding a knife; GRAB a knife first"));
         }
@@ -865,7 +865,7 @@ impl World {
             return Ok(vec![]);
         }
         // A plate is "eaten from" if something edible is on it.
-        if self.to_ix(node, Relation::On).any(|x| self.props_ix(x).contains(Property::Eatable)) {
+        if self.sources(node, Relation::On).any(|x| self.props_ix(x).contains(Property::Eatable)) {
             return Ok(vec![]);
         }
         Err(Fail::new(Affordance, format!("{} is not food and has no food on it", self.lbl(node))))
@@ -899,12 +899,12 @@ impl World {
                 Op::Remove(f, r, t) => self.logged_remove(&mut edges_before, f, r, t),
                 Op::RemoveAll(n, rels, reverse) => {
                     for &r in rels {
-                        let outs: Vec<Ix> = self.from_ix(n, r).collect();
+                        let outs: Vec<Ix> = self.targets(n, r).collect();
                         for t in outs {
                             self.logged_remove(&mut edges_before, n, r, t);
                         }
                         if reverse {
-                            let ins: Vec<Ix> = self.to_ix(n, r).collect();
+                            let ins: Vec<Ix> = self.sources(n, r).collect();
                             for f in ins {
                                 self.logged_remove(&mut edges_before, f, r, n);
                             }
@@ -912,15 +912,15 @@ impl World {
                     }
                 }
                 Op::CloseToInsideOf(c, n) => {
-                    let xs: Vec<Ix> = self.to_ix(n, Relation::Inside).collect();
+                    let xs: Vec<Ix> = self.sources(n, Relation::Inside).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToSupportsOf(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::On).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::On).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToContainersOf(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::Inside).filter(|&x| !self.is_room_ix(x)).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::Inside).filter(|&x| !self.is_room_ix(x)).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToBodyParts(c) => {
@@ -928,7 +928,7 @@ impl World {
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::FaceAsIt(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::Facing).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::Facing).collect();
                     for x in xs {
                         self.logged_add(&mut edges_before, c, Relation::Facing, x);
                     }
