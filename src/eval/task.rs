@@ -75,23 +75,35 @@ fn same_node(a: &Node, b: &Node) -> bool {
 /// EAI's relevant objects: ids of nodes that differ between the two graphs (or are in one only), and
 /// both ends of every edge that is in one graph only. Ascending.
 pub fn relevant_by_diff(init: &Graph, fin: &Graph) -> Vec<u32> {
-    let b: HashMap<u32, &Node> = fin.nodes.iter().map(|n| (n.id, n)).collect();
-    let a_ids: HashSet<u32> = init.nodes.iter().map(|n| n.id).collect();
+    diff_ids(&init.nodes, edge_list(init), &fin.nodes, edge_list(fin))
+}
+
+/// A graph's edges as `(from, relation, to)`, for [`diff_ids`].
+pub(crate) fn edge_list(g: &Graph) -> Vec<(u32, &str, u32)> {
+    g.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect()
+}
+
+/// [`relevant_by_diff`] on node lists and edge lists (which may borrow from the file's text).
+pub(crate) fn diff_ids<'a>(
+    a_nodes: &[Node],
+    mut ea: Vec<(u32, &'a str, u32)>,
+    b_nodes: &[Node],
+    mut eb: Vec<(u32, &'a str, u32)>,
+) -> Vec<u32> {
+    let b: HashMap<u32, &Node> = b_nodes.iter().map(|n| (n.id, n)).collect();
+    let a_ids: HashSet<u32> = a_nodes.iter().map(|n| n.id).collect();
     let mut ids = BTreeSet::new();
-    for n in &init.nodes {
+    for n in a_nodes {
         if !b.get(&n.id).is_some_and(|m| same_node(n, m)) {
             ids.insert(n.id);
         }
     }
-    ids.extend(fin.nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id)));
+    ids.extend(b_nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id)));
     // Edges as sorted sets, then one merge pass for the symmetric difference.
-    fn sorted(g: &Graph) -> Vec<(u32, &str, u32)> {
-        let mut v: Vec<(u32, &str, u32)> = g.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
+    for v in [&mut ea, &mut eb] {
         v.sort_unstable();
         v.dedup();
-        v
     }
-    let (ea, eb) = (sorted(init), sorted(fin));
     let (mut i, mut j) = (0, 0);
     while i < ea.len() || j < eb.len() {
         let odd = match (ea.get(i), eb.get(j)) {
@@ -149,6 +161,51 @@ impl Task {
     }
 }
 
+/// An EAI scene file's final graph, with its ~5,700 edges borrowing their relation names from the
+/// text: the final graph is only compared, so there is no need to allocate it.
+#[derive(Deserialize)]
+struct LightScene<'a> {
+    init_graph: Graph,
+    #[serde(borrow)]
+    final_graph: LightGraph<'a>,
+}
+
+#[derive(Deserialize)]
+struct LightGraph<'a> {
+    nodes: Vec<Node>,
+    #[serde(borrow)]
+    edges: Vec<LightEdge<'a>>,
+}
+
+#[derive(Deserialize)]
+struct LightEdge<'a> {
+    from_id: u32,
+    #[serde(borrow)]
+    relation_type: std::borrow::Cow<'a, str>,
+    to_id: u32,
+}
+
+/// One EAI scene file → the initial world and the relevant objects.
+fn eai_scene(id: &str, text: &str, origin: &str) -> Result<(World, Vec<u32>), EvalError> {
+    let name = format!("EAI task {id}");
+    match serde_json::from_str::<LightScene>(text) {
+        Ok(l) => {
+            let world = World::from_graph(&l.init_graph, &name)?;
+            let fin: Vec<(u32, &str, u32)> =
+                l.final_graph.edges.iter().map(|e| (e.from_id, e.relation_type.as_ref(), e.to_id)).collect();
+            let relevant = diff_ids(&l.init_graph.nodes, edge_list(&l.init_graph), &l.final_graph.nodes, fin);
+            Ok((world, relevant))
+        }
+        // Not the usual shape: the general reader accepts more, and words its errors better.
+        Err(_) => {
+            let scene = crate::world::parse_scene(text, origin)?;
+            let world = World::from_graph(&scene.init, &name)?;
+            let relevant = scene.final_graph.as_ref().map(|f| relevant_by_diff(&scene.init, f)).unwrap_or_default();
+            Ok((world, relevant))
+        }
+    }
+}
+
 /// Loads EAI tasks: all of them, or the given ids (an unknown id is an error listing examples).
 pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<Task>, EvalError> {
     let metas = data.tasks_meta()?;
@@ -164,14 +221,7 @@ pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<T
     }
     let metas: BTreeMap<String, _> =
         metas.into_iter().filter(|m| only.is_none_or(|o| o.contains(&m.id))).map(|m| (m.id.clone(), m)).collect();
-    let scenes = data.scenes(only, |id, scene| {
-        let world = World::from_graph(&scene.init, &format!("EAI task {id}"))?;
-        let relevant = match &scene.final_graph {
-            Some(fin) => relevant_by_diff(&scene.init, fin),
-            None => Vec::new(),
-        };
-        Ok((world, relevant))
-    })?;
+    let scenes = data.scene_texts(only, eai_scene)?;
     let mut tasks = Vec::with_capacity(scenes.len());
     for (id, (world, relevant)) in scenes {
         let Some(meta) = metas.get(&id) else { continue }; // a scene file with no task entry
