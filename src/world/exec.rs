@@ -109,7 +109,10 @@ pub struct Effects {
 impl Effects {
     /// Whether the action changed nothing in the graph (LOOKAT, TOUCH, …).
     pub fn is_empty(&self) -> bool {
-        self.added.is_empty() && self.removed.is_empty() && self.states_added.is_empty() && self.states_removed.is_empty()
+        self.added.is_empty()
+            && self.removed.is_empty()
+            && self.states_added.is_empty()
+            && self.states_removed.is_empty()
     }
 }
 
@@ -230,7 +233,10 @@ impl World {
             Verb::SwitchOn => self.switch(a, true),
             Verb::SwitchOff => self.switch(a, false),
             Verb::Drink => self.drink(a),
-            Verb::TurnTo => Ok(vec![Op::RemoveAll(self.char_ix(), FACING_ONLY, false), Op::Add(self.char_ix(), Relation::Facing, a)]),
+            Verb::TurnTo => Ok(vec![
+                Op::RemoveAll(self.char_ix(), FACING_ONLY, false),
+                Op::Add(self.char_ix(), Relation::Facing, a),
+            ]),
             Verb::LookAt | Verb::LookAtShort | Verb::LookAtLong | Verb::PointAt => self.lookat(a),
             Verb::Wipe => self.wipe(a),
             Verb::PutOn => self.puton(a),
@@ -321,7 +327,8 @@ impl World {
         if self.has_ix(c, Relation::Close, node) {
             return true;
         }
-        self.targets(c, Relation::Close).any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
+        self.targets(c, Relation::Close)
+            .any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
     }
 
     /// INSIDE something (not a room) that is CLOSED.
@@ -341,7 +348,8 @@ impl World {
 
     fn is_facing(&self, node: Ix) -> bool {
         let c = self.char_ix();
-        self.has_ix(c, Relation::Facing, node) || self.targets(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
+        self.has_ix(c, Relation::Facing, node)
+            || self.targets(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
     }
 
     fn lbl(&self, ix: Ix) -> String {
@@ -353,15 +361,14 @@ impl World {
             return Ok(());
         }
         let l = self.lbl(node);
-        Err(Fail::new(MissingStep, format!("the robot is not close to {l}; WALK to {l} first")).needs(
-            false,
-            Fact::Edge { from: self.character(), relation: Relation::Close, to: self.id(node) },
-        ))
+        Err(Fail::new(MissingStep, format!("the robot is not close to {l}; WALK to {l} first"))
+            .needs(false, Fact::Edge { from: self.character(), relation: Relation::Close, to: self.id(node) }))
     }
 
     fn need_free_hand(&self) -> Result<Relation, Fail> {
         self.free_hand().ok_or_else(|| {
-            let held: Vec<String> = self.held().iter().map(|&(_, id)| self.node(id).map(|n| n.label()).unwrap_or_default()).collect();
+            let held: Vec<String> =
+                self.held().iter().map(|&(_, id)| self.node(id).map(|n| n.label()).unwrap_or_default()).collect();
             Fail::new(
                 MissingStep,
                 format!(
@@ -387,9 +394,12 @@ impl World {
             None => Ok(()),
             Some(box_ix) => {
                 let b = self.lbl(box_ix);
-                Err(Fail::new(MissingStep, format!("{} is inside {b}, which is CLOSED; OPEN {b} first", self.lbl(node)))
-                    // EAI records the object's own OPEN state here.
-                    .needs(false, Fact::State { id: self.id(node), state: State::Open }))
+                Err(Fail::new(
+                    MissingStep,
+                    format!("{} is inside {b}, which is CLOSED; OPEN {b} first", self.lbl(node)),
+                )
+                // EAI records the object's own OPEN state here.
+                .needs(false, Fact::State { id: self.id(node), state: State::Open }))
             }
         }
     }
@@ -422,7 +432,10 @@ impl World {
         self.not_sitting_or_lying()?;
         let c = self.char_ix();
         let Some(room) = self.room_ix(node) else {
-            return Err(Fail::new(Affordance, format!("{} is not in any room, so it cannot be reached", self.lbl(node))));
+            return Err(Fail::new(
+                Affordance,
+                format!("{} is not in any room, so it cannot be reached", self.lbl(node)),
+            ));
         };
         // Doors are never in the way: VirtualHome's closed-door check is disabled in EAI's executor.
         let old_room = self.room_ix(c);
@@ -553,11 +566,8 @@ impl World {
                 .min_by_key(|&x| (self.id(x) as u64 & mask, self.id(x)))
                 .map(|x| (x, r))
         });
-        let mut ops = vec![
-            Op::RemoveAll(node, GRAB_CLEARS, true),
-            Op::AddBoth(c, Relation::Close, node),
-            Op::Add(c, hand, node),
-        ];
+        let mut ops =
+            vec![Op::RemoveAll(node, GRAB_CLEARS, true), Op::AddBoth(c, Relation::Close, node), Op::Add(c, hand, node)];
         if let Some(room) = self.room_ix(c) {
             ops.push(Op::Add(node, Relation::Inside, room));
         }
@@ -682,9 +692,12 @@ impl World {
     fn wipe(&self, node: Ix) -> Check {
         self.need_close(node)?;
         if self.hands_free() {
-            return Err(Fail::new(MissingStep, "the robot holds nothing to wipe with; GRAB a cloth (e.g. a rag or towel) first")
-                .needs(false, Fact::Holds { from: self.character(), to: None })
-                .connective(Connective::Any));
+            return Err(Fail::new(
+                MissingStep,
+                "the robot holds nothing to wipe with; GRAB a cloth (e.g. a rag or towel) first",
+            )
+            .needs(false, Fact::Holds { from: self.character(), to: None })
+            .connective(Connective::Any));
         }
         Ok(clean(node))
     }
@@ -693,7 +706,11 @@ impl World {
         self.need_holding(node)?;
         self.need_prop(node, Property::Clothes, "is not clothing")?;
         let c = self.char_ix();
-        Ok(vec![Op::Add(node, Relation::On, c), Op::Remove(c, Relation::HoldsLh, node), Op::Remove(c, Relation::HoldsRh, node)])
+        Ok(vec![
+            Op::Add(node, Relation::On, c),
+            Op::Remove(c, Relation::HoldsLh, node),
+            Op::Remove(c, Relation::HoldsRh, node),
+        ])
     }
 
     fn putoff(&self, node: Ix) -> Check {
@@ -736,7 +753,10 @@ impl World {
         }
         let dc = self.class_ix(dest);
         if !self.props_ix(dest).contains(Property::Recipient) && !matches!(dc, "hands_both" | "sponge" | "face") {
-            return Err(Fail::new(Affordance, format!("{} cannot receive a pour (it lacks RECIPIENT)", self.lbl(dest))));
+            return Err(Fail::new(
+                Affordance,
+                format!("{} cannot receive a pour (it lacks RECIPIENT)", self.lbl(dest)),
+            ));
         }
         self.need_holding(src)?;
         self.need_close(dest)?;
@@ -770,15 +790,20 @@ impl World {
         let l = self.lbl(node);
         let facing = Fact::Edge { from: self.character(), relation: Relation::Facing, to: self.id(node) };
         if !self.is_facing(node) {
-            return Err(Fail::new(MissingStep, format!("the robot is not facing {l}; TURNTO {l} first")).needs(false, facing));
+            return Err(
+                Fail::new(MissingStep, format!("the robot is not facing {l}; TURNTO {l} first")).needs(false, facing)
+            );
         }
         let s = self.states_ix(c);
         if self.class_ix(node) != "computer"
             && (s.contains(State::Sitting) || s.contains(State::Lying))
             && !self.has_ix(c, Relation::Facing, node)
         {
-            return Err(Fail::new(MissingStep, format!("the robot is not facing {l} from where it sits; TURNTO {l} first"))
-                .needs(false, facing));
+            return Err(Fail::new(
+                MissingStep,
+                format!("the robot is not facing {l} from where it sits; TURNTO {l} first"),
+            )
+            .needs(false, facing));
         }
         self.need_not_inside_closed(node)?;
         Ok(vec![])
@@ -842,7 +867,8 @@ impl World {
             return Err(Fail::new(AdditionalStep, format!("{l} is already unplugged")));
         }
         // EAI lets PLUGOUT of an appliance that is ON go through.
-        let (gone, new) = if plug_in { (State::PluggedOut, State::PluggedIn) } else { (State::PluggedIn, State::PluggedOut) };
+        let (gone, new) =
+            if plug_in { (State::PluggedOut, State::PluggedIn) } else { (State::PluggedIn, State::PluggedOut) };
         Ok(vec![Op::State(node, gone, false), Op::State(node, new, true)])
     }
 
@@ -956,13 +982,21 @@ impl World {
             let now = self.has_ix(f, r, t);
             if now != before {
                 let e = (self.id(f), r, self.id(t));
-                if now { fx.added.push(e) } else { fx.removed.push(e) }
+                if now {
+                    fx.added.push(e)
+                } else {
+                    fx.removed.push(e)
+                }
             }
         }
         for ((n, s), before) in states_before {
             let now = self.states_ix(n).contains(s);
             if now != before {
-                if now { fx.states_added.push((self.id(n), s)) } else { fx.states_removed.push((self.id(n), s)) }
+                if now {
+                    fx.states_added.push((self.id(n), s))
+                } else {
+                    fx.states_removed.push((self.id(n), s))
+                }
             }
         }
         fx.added.sort();

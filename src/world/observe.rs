@@ -57,7 +57,11 @@ impl World {
         if s.contains(State::Sitting) || s.contains(State::Lying) {
             let on: Vec<String> = self.targets(c, Relation::On).map(|x| self.label_ix(x)).collect();
             let how = if s.contains(State::Lying) { "lying" } else { "sitting" };
-            let _ = write!(robot, "; {how}{}", if on.is_empty() { String::new() } else { format!(" on {}", on.join(", ")) });
+            let _ = write!(
+                robot,
+                "; {how}{}",
+                if on.is_empty() { String::new() } else { format!(" on {}", on.join(", ")) }
+            );
         }
         // Close to: relevant objects by name, the others counted.
         let close: Vec<Ix> = self.targets(c, Relation::Close).filter(|&x| !self.is_room_ix(x)).collect();
@@ -74,7 +78,8 @@ impl World {
                 let _ = write!(robot, " and {others} other objects");
             }
         }
-        let facing: Vec<String> = self.targets(c, Relation::Facing).filter(|x| rel_ix.contains(x)).map(|x| self.label_ix(x)).collect();
+        let facing: Vec<String> =
+            self.targets(c, Relation::Facing).filter(|x| rel_ix.contains(x)).map(|x| self.label_ix(x)).collect();
         if !facing.is_empty() {
             let _ = write!(robot, "; facing {}", facing.join(", "));
         }
@@ -215,7 +220,10 @@ mod tests {
         w.execute(&a(Verb::Grab, &[("apple", 12)])).unwrap();
         let o = w.observe(&[12, 10, 11], 10_000);
         assert!(o.starts_with("robot: in <kitchen> (1); holding <apple> (12) (right hand); close to <kitchencounter> (11), <apple> (12)"), "{o}");
-        assert!(o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"), "{o}");
+        assert!(
+            o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"),
+            "{o}"
+        );
         assert!(o.contains("<kitchencounter> (11): CLEAN; in <kitchen> (1); has on it <milk> (13), <bread> (14), <microwave> (15), <knife> (24), <rag> (26)"), "{o}");
         assert_eq!(o, w.observe(&[11, 10, 12, 12], 10_000), "order and duplicates do not matter");
     }

@@ -106,12 +106,14 @@ impl World {
             ids.push(n.id);
             let mut p = PropertySet::EMPTY;
             for s in &n.properties {
-                let v: Property = s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
+                let v: Property =
+                    s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 p.insert(v);
             }
             let mut st = StateSet::EMPTY;
             for s in &n.states {
-                let v: State = s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
+                let v: State =
+                    s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 st.insert(v);
             }
             class.push(n.class_name.clone());
@@ -126,8 +128,7 @@ impl World {
             .position(|c| c == "character")
             .ok_or_else(|| invalid(origin, "the scene has no node of class 'character' (the robot)".into()))?
             as Ix;
-        let body_parts =
-            (0..ids.len() as Ix).filter(|&i| props[i as usize].contains(Property::BodyPart)).collect();
+        let body_parts = (0..ids.len() as Ix).filter(|&i| props[i as usize].contains(Property::BodyPart)).collect();
         let mut out = vec![Vec::new(); ids.len()];
         let mut inc = vec![Vec::new(); ids.len()];
         for e in &g.edges {
@@ -164,7 +165,8 @@ impl World {
             initial_out,
             initial_states,
         };
-        let mut w = World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
+        let mut w =
+            World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
         w.history.character_hands_were_free = w.hands_free();
         w.history.character_held_something = !w.hands_free();
         Ok(w)
