@@ -9,6 +9,11 @@
 //! later step undid) is a wrong-order error, as EAI's temporal-order checker decides it. Where EAI's
 //! label is misleading for a planner (a closed container is an "affordance" error there, an unplugged
 //! appliance an "already satisfied" one), `kind` is ours and `eai_kind` keeps EAI's label.
+//!
+//! Where EAI's executor is more lenient than one might expect, it is followed, because plans are
+//! scored against it: closed doors never block a walk (its door check is disabled), PUTBACK/PUTIN do
+//! not require SURFACES/CONTAINERS on the destination, PUSH does not require MOVABLE, PLUGOUT of an
+//! appliance that is on goes through, STANDUP keeps the robot's ON edge to the seat.
 
 use std::collections::BTreeMap;
 use std::fmt;
