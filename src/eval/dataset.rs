@@ -196,8 +196,10 @@ impl EaiData {
                 .par_bridge()
                 .map(|(id, bytes)| {
                     let origin = format!("{}:file{id}.json", path.display());
-                    let text = std::str::from_utf8(&bytes)
-                        .map_err(|e| EvalError::Archive { path: path.clone(), message: format!("file{id}.json: {e}") })?;
+                    let text = std::str::from_utf8(&bytes).map_err(|e| EvalError::Archive {
+                        path: path.clone(),
+                        message: format!("file{id}.json: {e}"),
+                    })?;
                     Ok((id.clone(), f(&id, text, &origin)?))
                 })
                 .collect();

@@ -154,10 +154,7 @@ pub fn relevant_by_goal(world: &World, goal: &Goal, gold: Option<&Program>) -> V
 impl Task {
     /// The relevant objects as `(class_name, id)`, for prompts and reports.
     pub fn relevant_objects(&self) -> Vec<(String, u32)> {
-        self.relevant
-            .iter()
-            .filter_map(|&id| self.world.node(id).map(|n| (n.class_name.to_string(), id)))
-            .collect()
+        self.relevant.iter().filter_map(|&id| self.world.node(id).map(|n| (n.class_name.to_string(), id))).collect()
     }
 }
 
@@ -282,7 +279,8 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
             "{e} (a task file is a JSON list of {{\"id\", \"scene\", \"title\", \"description\", \"vh_goal\", \"gold\"}})"
         ),
     })?;
-    let task_err = |task: &str, message: String| EvalError::Task { file: path.to_path_buf(), task: task.to_string(), message };
+    let task_err =
+        |task: &str, message: String| EvalError::Task { file: path.to_path_buf(), task: task.to_string(), message };
     if raw.is_empty() {
         return Err(EvalError::Data { path: path.to_path_buf(), message: "the task file lists no tasks".into() });
     }
@@ -326,9 +324,14 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
         let data = EaiData::open(data)?;
         let known: BTreeSet<String> = data.tasks_meta()?.into_iter().map(|m| m.id).collect();
         if let Some(t) = raw.iter().find(|t| eai_ids.contains(&t.scene) && !known.contains(&t.scene)) {
-            return Err(task_err(&t.id, format!("scene '{}' is not an EAI task id (see eai/resources/id2task.json)", t.scene)));
+            return Err(task_err(
+                &t.id,
+                format!("scene '{}' is not an EAI task id (see eai/resources/id2task.json)", t.scene),
+            ));
         }
-        for (id, w) in data.scenes(Some(&eai_ids), |id, s| Ok(World::from_graph(&s.init, &format!("EAI task {id}"))?))? {
+        for (id, w) in
+            data.scenes(Some(&eai_ids), |id, s| Ok(World::from_graph(&s.init, &format!("EAI task {id}"))?))?
+        {
             eai_worlds.insert(id, w);
         }
     }
@@ -385,10 +388,9 @@ fn parse_gold(lines: &[String]) -> Result<Program, ParseError> {
 fn check_object(world: &World, id: u32, class_name: &str, scene: &str, what: &str) -> Result<(), String> {
     match world.node(id) {
         None => Err(format!("{what} names object id {id} (<{class_name}>), which is not in scene '{scene}'")),
-        Some(n) if n.class_name != class_name => Err(format!(
-            "{what} names <{class_name}> ({id}), but node {id} of scene '{scene}' is <{}>",
-            n.class_name
-        )),
+        Some(n) if n.class_name != class_name => {
+            Err(format!("{what} names <{class_name}> ({id}), but node {id} of scene '{scene}' is <{}>", n.class_name))
+        }
         Some(_) => Ok(()),
     }
 }
@@ -443,7 +445,12 @@ mod tests {
     #[test]
     fn relevant_objects_follow_eai_diff_rule() {
         let init = Graph {
-            nodes: vec![n(1, "kitchen", &[]), n(2, "character", &[]), n(3, "fridge", &["CLOSED", "CLEAN"]), n(4, "apple", &[])],
+            nodes: vec![
+                n(1, "kitchen", &[]),
+                n(2, "character", &[]),
+                n(3, "fridge", &["CLOSED", "CLEAN"]),
+                n(4, "apple", &[]),
+            ],
             edges: vec![e(2, "INSIDE", 1), e(4, "INSIDE", 3), e(3, "INSIDE", 1)],
         };
         let mut fin = init.clone();

@@ -197,8 +197,7 @@ mod tests {
         Program::new(vec![
             Action::new(Verb::Walk, vec![ObjRef::new("kitchen", 11)]).unwrap(),
             Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
-            Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("washing_machine", 1001)])
-                .unwrap(),
+            Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("washing_machine", 1001)]).unwrap(),
             Action::new(Verb::StandUp, vec![]).unwrap(),
             Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
             Action::new(Verb::PlugIn, vec![ObjRef::new("washing_machine", 1001)]).unwrap(),
