@@ -17,7 +17,9 @@ fn tasks() -> Option<&'static Vec<Task>> {
                 if std::env::var("STEP_REQUIRE_DATA").is_ok_and(|v| v == "1") {
                     panic!("STEP_REQUIRE_DATA=1 but the data is missing: {e}");
                 }
-                eprintln!("note: skipping the EAI gold tests: {e}");
+                // Straight to stderr: libtest captures eprintln!, and the note should be seen.
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "note: skipping the EAI gold tests: {e}");
                 None
             }
             Ok(d) => Some(TaskSource { tasks_file: None, data: Some(d.root) }.load(None).expect("EAI tasks load")),
