@@ -55,9 +55,7 @@ fn error_of(task: &str) -> String {
 }
 
 fn task(scene: &str, goal: &str, gold: &str) -> String {
-    format!(
-        r#"{{"id": "t1", "scene": "{scene}", "title": "T", "vh_goal": {{"goal": [{goal}], "actions": []}}{gold}}}"#
-    )
+    format!(r#"{{"id": "t1", "scene": "{scene}", "title": "T", "vh_goal": {{"goal": [{goal}], "actions": []}}{gold}}}"#)
 }
 
 fn kitchen() -> String {
@@ -106,7 +104,11 @@ fn bad_files_and_scenes_say_what_is_wrong() {
 
 fn step_cmd(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_step")).args(args).output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 #[test]
@@ -127,7 +129,8 @@ fn sim_run_prints_each_step_and_the_goal_check() {
     assert!(out.contains("[PUTIN] <apple> (12) <fridge> (10)") && out.contains("success: yes"), "{out}");
 
     std::fs::write(&plan, "[GRAB] <apple> (12)\n[WALK] <fridge> (10)\n").unwrap();
-    let (ok, out, _) = step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p, "--format", "lines"]);
+    let (ok, out, _) =
+        step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p, "--format", "lines"]);
     assert!(ok);
     assert!(out.contains("FAILED missing_step") && out.contains("1 later step(s) not run"), "{out}");
     assert!(out.contains("unmet: no edge 12 INSIDE 10") && out.contains("success: no"), "{out}");

@@ -107,7 +107,8 @@ fn gold(a: GoldArgs) -> anyhow::Result<()> {
     };
     let timing = Timing { load_s, run_s, wall_s: t0.elapsed().as_secs_f64() };
     if a.json {
-        let report = GoldReport { source: source_name, summary: &summary, rates: summary.rates(), tasks: &reports, timing };
+        let report =
+            GoldReport { source: source_name, summary: &summary, rates: summary.rates(), tasks: &reports, timing };
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
@@ -133,9 +134,6 @@ fn gold(a: GoldArgs) -> anyhow::Result<()> {
         let verdict = if r.success { "success" } else { "FAIL" };
         println!("  {} ({}) {verdict}: {}", r.id, r.title, why.join(" | "));
     }
-    println!(
-        "time: load {:.2} s, run {:.3} s, wall {:.2} s",
-        timing.load_s, timing.run_s, timing.wall_s
-    );
+    println!("time: load {:.2} s, run {:.3} s, wall {:.2} s", timing.load_s, timing.run_s, timing.wall_s);
     Ok(())
 }

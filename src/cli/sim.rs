@@ -112,7 +112,11 @@ fn run_one(a: RunArgs) -> anyhow::Result<()> {
             StepResult::Ok { .. } => "ok".to_string(),
             StepResult::Skipped { failure } => format!("skipped ({}): {}", failure.kind, failure.message),
             StepResult::Failed { failure } => {
-                let eai = if failure.eai_kind != failure.kind { format!(", EAI: {}", failure.eai_kind) } else { String::new() };
+                let eai = if failure.eai_kind != failure.kind {
+                    format!(", EAI: {}", failure.eai_kind)
+                } else {
+                    String::new()
+                };
                 format!("FAILED {}{eai}: {}", failure.kind, failure.message)
             }
         };
@@ -138,7 +142,10 @@ fn run_one(a: RunArgs) -> anyhow::Result<()> {
     }
     if !out.outside_relevant.is_empty() {
         let objs: Vec<String> = out.outside_relevant.iter().map(|o| o.to_string()).collect();
-        println!("note: objects outside the task's relevant list (EAI's scorer would reject the plan): {}", objs.join(", "));
+        println!(
+            "note: objects outside the task's relevant list (EAI's scorer would reject the plan): {}",
+            objs.join(", ")
+        );
     }
     println!("success: {}", if out.success { "yes" } else { "no" });
     Ok(())

@@ -144,6 +144,16 @@ impl EaiData {
         T: Send,
         F: Fn(&str, SceneFile) -> Result<T, EvalError> + Sync,
     {
+        self.scene_texts(wanted, |id, text, origin| f(id, parse_scene(text, origin)?))
+    }
+
+    /// As [`EaiData::scenes`], handing `f` each file's JSON text (and a name for errors), for callers
+    /// that parse it their own way.
+    pub fn scene_texts<T, F>(&self, wanted: Option<&BTreeSet<String>>, f: F) -> Result<Vec<(String, T)>, EvalError>
+    where
+        T: Send,
+        F: Fn(&str, &str, &str) -> Result<T, EvalError> + Sync,
+    {
         let path = self.graphs_path();
         let archive_err = |message: String| EvalError::Archive { path: path.clone(), message };
         let file = std::fs::File::open(&path).map_err(|source| EvalError::Io { path: path.clone(), source })?;
@@ -186,10 +196,11 @@ impl EaiData {
                 .par_bridge()
                 .map(|(id, bytes)| {
                     let origin = format!("{}:file{id}.json", path.display());
-                    let text = std::str::from_utf8(&bytes)
-                        .map_err(|e| EvalError::Archive { path: path.clone(), message: format!("file{id}.json: {e}") })?;
-                    let scene = parse_scene(text, &origin)?;
-                    Ok((id.clone(), f(&id, scene)?))
+                    let text = std::str::from_utf8(&bytes).map_err(|e| EvalError::Archive {
+                        path: path.clone(),
+                        message: format!("file{id}.json: {e}"),
+                    })?;
+                    Ok((id.clone(), f(&id, text, &origin)?))
                 })
                 .collect();
             let read = reader.join().unwrap_or_else(|_| Err(archive_err("the archive reader panicked".into())));

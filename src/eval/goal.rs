@@ -132,8 +132,7 @@ impl Goal {
             .iter()
             .map(|n| (n.clone(), end.node(n.id).is_some_and(|v| v.states.contains(n.state))))
             .collect();
-        let edges =
-            self.edges.iter().map(|e| (e.clone(), end.has_edge(e.from_id, e.relation_type, e.to_id))).collect();
+        let edges = self.edges.iter().map(|e| (e.clone(), end.has_edge(e.from_id, e.relation_type, e.to_id))).collect();
         // Greedy earliest match is optimal for "longest prefix that is an ordered subsequence".
         let mut cursor = 0;
         let mut prefix_intact = true;
@@ -321,8 +320,10 @@ mod tests {
     #[test]
     fn bad_goal_entries_are_named() {
         let bad = |j: &str| serde_json::from_str::<RawGoal>(j).unwrap().to_goal().unwrap_err();
-        assert!(bad(r#"{"goal": [{"id": 1, "class_name": "a", "state": "HAPPY"}]}"#).contains("goal 1: unknown state 'HAPPY'"));
-        assert!(bad(r#"{"goal": [{"from_id": 1, "relation_type": "NEAR", "to_id": 2}]}"#).contains("unknown relation 'NEAR'"));
+        assert!(bad(r#"{"goal": [{"id": 1, "class_name": "a", "state": "HAPPY"}]}"#)
+            .contains("goal 1: unknown state 'HAPPY'"));
+        assert!(bad(r#"{"goal": [{"from_id": 1, "relation_type": "NEAR", "to_id": 2}]}"#)
+            .contains("unknown relation 'NEAR'"));
         assert!(bad(r#"{"actions": ["DRINK", "FLY|WALK"]}"#).contains("action goal 2 'FLY|WALK'"));
         assert!(serde_json::from_str::<RawGoal>(r#"{"goal": [{"id": 1, "state": "ON"}]}"#).is_err());
     }

@@ -11,7 +11,7 @@ pub mod goal;
 pub mod run;
 pub mod task;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 pub use dataset::{EaiData, DATA_ENV};
 pub use goal::{ActionGoal, Count, EdgeGoal, Goal, GoalCheck, NodeGoal, RawGoal};
@@ -77,10 +77,5 @@ impl TaskSource {
             }
             None => task::load_eai(&EaiData::open(self.data.as_deref())?, only.as_ref()),
         }
-    }
-
-    /// The data root this source would use for EAI tasks (for messages).
-    pub fn data_root(&self) -> Option<&Path> {
-        self.data.as_deref()
     }
 }

@@ -21,11 +21,17 @@ use crate::world::{Effects, ExecFailure, FailureKind, World};
 #[derive(Clone, Debug, Serialize)]
 #[serde(tag = "status", rename_all = "snake_case")]
 pub enum StepResult {
-    Ok { effects: Effects },
+    Ok {
+        effects: Effects,
+    },
     /// An additional step: its effect already held; nothing changed and the run went on.
-    Skipped { failure: ExecFailure },
+    Skipped {
+        failure: ExecFailure,
+    },
     /// The run stopped here.
-    Failed { failure: ExecFailure },
+    Failed {
+        failure: ExecFailure,
+    },
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -169,7 +175,12 @@ pub fn score(task: &Task, plan: &PlanInput) -> TaskReport {
     let program = match plan {
         PlanInput::Plan(p) => p,
         PlanInput::Unreadable(e) => {
-            return unscored(ErrorReport { kind: parse_kind(e).into(), eai_kind: None, step: None, message: e.to_string() })
+            return unscored(ErrorReport {
+                kind: parse_kind(e).into(),
+                eai_kind: None,
+                step: None,
+                message: e.to_string(),
+            })
         }
         PlanInput::Missing => {
             return unscored(ErrorReport {
@@ -181,7 +192,12 @@ pub fn score(task: &Task, plan: &PlanInput) -> TaskReport {
         }
     };
     if program.actions.is_empty() {
-        return unscored(ErrorReport { kind: "parse_empty".into(), eai_kind: None, step: None, message: "the plan has no steps".into() });
+        return unscored(ErrorReport {
+            kind: "parse_empty".into(),
+            eai_kind: None,
+            step: None,
+            message: "the plan has no steps".into(),
+        });
     }
     let out = run_plan(task, program);
     let error = out.failure.as_ref().map(|f| ErrorReport {
@@ -291,7 +307,13 @@ impl Summary {
             out.push_str(&format!("{name:<22} {:>9} {:>8}\n", format!("{met}/{total}"), pct(r)));
         };
         out.push_str(&format!("{:<22} {:>9} {:>8}\n", "metric", "count", "rate"));
-        row(&mut out, "parsed", self.parsed, self.tasks, (self.tasks > 0).then(|| 100.0 * self.parsed as f64 / self.tasks as f64));
+        row(
+            &mut out,
+            "parsed",
+            self.parsed,
+            self.tasks,
+            (self.tasks > 0).then(|| 100.0 * self.parsed as f64 / self.tasks as f64),
+        );
         row(&mut out, "executed", self.executed, self.tasks, rates.execution_success);
         row(&mut out, "task success", self.succeeded, self.tasks, rates.task_success);
         row(&mut out, "state goals", self.state_goals.met, self.state_goals.total, rates.state_goal);
@@ -403,7 +425,11 @@ mod tests {
     fn unreadable_and_missing_plans_score_zero_with_their_kind() {
         let t = task(LAMP_ON);
         let e = Program::parse("[FLY] <lamp> (3)", PlanFormat::Lines).unwrap_err();
-        let reports = [score(&t, &PlanInput::Unreadable(e)), score(&t, &PlanInput::Missing), score(&t, &plan("[WALK] <lamp> (3)\n[SWITCHON] <lamp> (3)"))];
+        let reports = [
+            score(&t, &PlanInput::Unreadable(e)),
+            score(&t, &PlanInput::Missing),
+            score(&t, &plan("[WALK] <lamp> (3)\n[SWITCHON] <lamp> (3)")),
+        ];
         assert_eq!(reports[0].error.as_ref().unwrap().kind, "parse_unknown_action");
         assert_eq!(reports[1].error.as_ref().unwrap().kind, "no_plan");
         let s = Summary::of(&reports);

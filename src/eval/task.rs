@@ -10,7 +10,7 @@
 //! a user's own goal) they are the objects the goal and the gold plan name, the character, and the
 //! rooms all of these are in.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -46,31 +46,94 @@ pub struct Task {
     pub origin: TaskOrigin,
 }
 
-/// A node with its property and state lists sorted, for comparing nodes as EAI does.
-fn normalised(n: &Node) -> Node {
-    let mut n = n.clone();
-    n.properties.sort();
-    n.states.sort();
-    n
+/// Whether two lists hold the same strings with the same multiplicities (EAI compares nodes with
+/// their property and state lists sorted).
+fn same_multiset(a: &[String], b: &[String]) -> bool {
+    if a == b {
+        return true;
+    }
+    if a.len() != b.len() {
+        return false;
+    }
+    let (mut x, mut y) = (a.to_vec(), b.to_vec());
+    x.sort_unstable();
+    y.sort_unstable();
+    x == y
+}
+
+fn same_node(a: &Node, b: &Node) -> bool {
+    a.id == b.id
+        && a.class_name == b.class_name
+        && a.category == b.category
+        && a.prefab_name == b.prefab_name
+        && a.bounding_box == b.bounding_box
+        && a.obj_transform == b.obj_transform
+        && same_multiset(&a.properties, &b.properties)
+        && same_multiset(&a.states, &b.states)
 }
 
 /// EAI's relevant objects: ids of nodes that differ between the two graphs (or are in one only), and
 /// both ends of every edge that is in one graph only. Ascending.
 pub fn relevant_by_diff(init: &Graph, fin: &Graph) -> Vec<u32> {
-    let a: BTreeMap<u32, Node> = init.nodes.iter().map(|n| (n.id, normalised(n))).collect();
-    let b: BTreeMap<u32, Node> = fin.nodes.iter().map(|n| (n.id, normalised(n))).collect();
+    diff_ids(&init.nodes, edge_list(init), &fin.nodes, edge_list(fin))
+}
+
+/// A graph's edges as `(from, relation, to)`, for [`diff_ids`].
+pub(crate) fn edge_list(g: &Graph) -> Vec<(u32, &str, u32)> {
+    g.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect()
+}
+
+/// [`relevant_by_diff`] on node lists and edge lists (which may borrow from the file's text).
+pub(crate) fn diff_ids<'a>(
+    a_nodes: &[Node],
+    mut ea: Vec<(u32, &'a str, u32)>,
+    b_nodes: &[Node],
+    mut eb: Vec<(u32, &'a str, u32)>,
+) -> Vec<u32> {
+    let b: HashMap<u32, &Node> = b_nodes.iter().map(|n| (n.id, n)).collect();
+    let a_ids: HashSet<u32> = a_nodes.iter().map(|n| n.id).collect();
     let mut ids = BTreeSet::new();
-    for (id, n) in &a {
-        if b.get(id) != Some(n) {
-            ids.insert(*id);
+    for n in a_nodes {
+        if !b.get(&n.id).is_some_and(|m| same_node(n, m)) {
+            ids.insert(n.id);
         }
     }
-    ids.extend(b.keys().filter(|id| !a.contains_key(id)));
-    let ea: BTreeSet<_> = init.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
-    let eb: BTreeSet<_> = fin.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
-    for &(f, _, t) in ea.symmetric_difference(&eb) {
-        ids.insert(f);
-        ids.insert(t);
+    ids.extend(b_nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id)));
+    // Edges as sorted sets, then one merge pass for the symmetric difference.
+    for v in [&mut ea, &mut eb] {
+        v.sort_unstable();
+        v.dedup();
+    }
+    let (mut i, mut j) = (0, 0);
+    while i < ea.len() || j < eb.len() {
+        let odd = match (ea.get(i), eb.get(j)) {
+            (Some(x), Some(y)) if x == y => {
+                i += 1;
+                j += 1;
+                None
+            }
+            (Some(x), Some(y)) if x < y => {
+                i += 1;
+                Some(*x)
+            }
+            (Some(_), Some(y)) => {
+                j += 1;
+                Some(*y)
+            }
+            (Some(x), None) => {
+                i += 1;
+                Some(*x)
+            }
+            (None, Some(y)) => {
+                j += 1;
+                Some(*y)
+            }
+            (None, None) => None,
+        };
+        if let Some((f, _, t)) = odd {
+            ids.insert(f);
+            ids.insert(t);
+        }
     }
     ids.into_iter().collect()
 }
@@ -91,10 +154,52 @@ pub fn relevant_by_goal(world: &World, goal: &Goal, gold: Option<&Program>) -> V
 impl Task {
     /// The relevant objects as `(class_name, id)`, for prompts and reports.
     pub fn relevant_objects(&self) -> Vec<(String, u32)> {
-        self.relevant
-            .iter()
-            .filter_map(|&id| self.world.node(id).map(|n| (n.class_name.to_string(), id)))
-            .collect()
+        self.relevant.iter().filter_map(|&id| self.world.node(id).map(|n| (n.class_name.to_string(), id))).collect()
+    }
+}
+
+/// An EAI scene file's final graph, with its ~5,700 edges borrowing their relation names from the
+/// text: the final graph is only compared, so there is no need to allocate it.
+#[derive(Deserialize)]
+struct LightScene<'a> {
+    init_graph: Graph,
+    #[serde(borrow)]
+    final_graph: LightGraph<'a>,
+}
+
+#[derive(Deserialize)]
+struct LightGraph<'a> {
+    nodes: Vec<Node>,
+    #[serde(borrow)]
+    edges: Vec<LightEdge<'a>>,
+}
+
+#[derive(Deserialize)]
+struct LightEdge<'a> {
+    from_id: u32,
+    #[serde(borrow)]
+    relation_type: std::borrow::Cow<'a, str>,
+    to_id: u32,
+}
+
+/// One EAI scene file → the initial world and the relevant objects.
+fn eai_scene(id: &str, text: &str, origin: &str) -> Result<(World, Vec<u32>), EvalError> {
+    let name = format!("EAI task {id}");
+    match serde_json::from_str::<LightScene>(text) {
+        Ok(l) => {
+            let world = World::from_graph(&l.init_graph, &name)?;
+            let fin: Vec<(u32, &str, u32)> =
+                l.final_graph.edges.iter().map(|e| (e.from_id, e.relation_type.as_ref(), e.to_id)).collect();
+            let relevant = diff_ids(&l.init_graph.nodes, edge_list(&l.init_graph), &l.final_graph.nodes, fin);
+            Ok((world, relevant))
+        }
+        // Not the usual shape: the general reader accepts more, and words its errors better.
+        Err(_) => {
+            let scene = crate::world::parse_scene(text, origin)?;
+            let world = World::from_graph(&scene.init, &name)?;
+            let relevant = scene.final_graph.as_ref().map(|f| relevant_by_diff(&scene.init, f)).unwrap_or_default();
+            Ok((world, relevant))
+        }
     }
 }
 
@@ -113,14 +218,7 @@ pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<T
     }
     let metas: BTreeMap<String, _> =
         metas.into_iter().filter(|m| only.is_none_or(|o| o.contains(&m.id))).map(|m| (m.id.clone(), m)).collect();
-    let scenes = data.scenes(only, |id, scene| {
-        let world = World::from_graph(&scene.init, &format!("EAI task {id}"))?;
-        let relevant = match &scene.final_graph {
-            Some(fin) => relevant_by_diff(&scene.init, fin),
-            None => Vec::new(),
-        };
-        Ok((world, relevant))
-    })?;
+    let scenes = data.scene_texts(only, eai_scene)?;
     let mut tasks = Vec::with_capacity(scenes.len());
     for (id, (world, relevant)) in scenes {
         let Some(meta) = metas.get(&id) else { continue }; // a scene file with no task entry
@@ -181,7 +279,8 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
             "{e} (a task file is a JSON list of {{\"id\", \"scene\", \"title\", \"description\", \"vh_goal\", \"gold\"}})"
         ),
     })?;
-    let task_err = |task: &str, message: String| EvalError::Task { file: path.to_path_buf(), task: task.to_string(), message };
+    let task_err =
+        |task: &str, message: String| EvalError::Task { file: path.to_path_buf(), task: task.to_string(), message };
     if raw.is_empty() {
         return Err(EvalError::Data { path: path.to_path_buf(), message: "the task file lists no tasks".into() });
     }
@@ -225,9 +324,14 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
         let data = EaiData::open(data)?;
         let known: BTreeSet<String> = data.tasks_meta()?.into_iter().map(|m| m.id).collect();
         if let Some(t) = raw.iter().find(|t| eai_ids.contains(&t.scene) && !known.contains(&t.scene)) {
-            return Err(task_err(&t.id, format!("scene '{}' is not an EAI task id (see eai/resources/id2task.json)", t.scene)));
+            return Err(task_err(
+                &t.id,
+                format!("scene '{}' is not an EAI task id (see eai/resources/id2task.json)", t.scene),
+            ));
         }
-        for (id, w) in data.scenes(Some(&eai_ids), |id, s| Ok(World::from_graph(&s.init, &format!("EAI task {id}"))?))? {
+        for (id, w) in
+            data.scenes(Some(&eai_ids), |id, s| Ok(World::from_graph(&s.init, &format!("EAI task {id}"))?))?
+        {
             eai_worlds.insert(id, w);
         }
     }
@@ -284,10 +388,9 @@ fn parse_gold(lines: &[String]) -> Result<Program, ParseError> {
 fn check_object(world: &World, id: u32, class_name: &str, scene: &str, what: &str) -> Result<(), String> {
     match world.node(id) {
         None => Err(format!("{what} names object id {id} (<{class_name}>), which is not in scene '{scene}'")),
-        Some(n) if n.class_name != class_name => Err(format!(
-            "{what} names <{class_name}> ({id}), but node {id} of scene '{scene}' is <{}>",
-            n.class_name
-        )),
+        Some(n) if n.class_name != class_name => {
+            Err(format!("{what} names <{class_name}> ({id}), but node {id} of scene '{scene}' is <{}>", n.class_name))
+        }
         Some(_) => Ok(()),
     }
 }
@@ -342,7 +445,12 @@ mod tests {
     #[test]
     fn relevant_objects_follow_eai_diff_rule() {
         let init = Graph {
-            nodes: vec![n(1, "kitchen", &[]), n(2, "character", &[]), n(3, "fridge", &["CLOSED", "CLEAN"]), n(4, "apple", &[])],
+            nodes: vec![
+                n(1, "kitchen", &[]),
+                n(2, "character", &[]),
+                n(3, "fridge", &["CLOSED", "CLEAN"]),
+                n(4, "apple", &[]),
+            ],
             edges: vec![e(2, "INSIDE", 1), e(4, "INSIDE", 3), e(3, "INSIDE", 1)],
         };
         let mut fin = init.clone();

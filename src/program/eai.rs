@@ -56,7 +56,12 @@ fn strip_fence(text: &str) -> &str {
 fn read_entries(text: &str) -> Result<Entries, ParseError> {
     let body = strip_fence(text);
     let Some(start) = body.find('{') else {
-        return Err(ParseError::syntax(PlanFormat::Eai, Location::Line { line: 1, column: Some(1) }, SHAPE, super::excerpt(body)));
+        return Err(ParseError::syntax(
+            PlanFormat::Eai,
+            Location::Line { line: 1, column: Some(1) },
+            SHAPE,
+            super::excerpt(body),
+        ));
     };
     // Lines skipped before the object (prose, the fence) shift serde's positions.
     let skipped = body.as_ptr() as usize - text.as_ptr() as usize; // body is a sub-slice of text
@@ -108,12 +113,14 @@ pub(super) fn parse(text: &str) -> Result<Vec<Action>, ParseError> {
             }
             let args = values
                 .chunks(2)
-                .map(|pair| object(&pair[0], &pair[1]).ok_or_else(|| {
-                    at(ParseErrorKind::Syntax {
-                        expected: format!("an object name (a string) and an id (a number) in \"{key}\""),
-                        found: format!("{}, {}", pair[0], pair[1]),
+                .map(|pair| {
+                    object(&pair[0], &pair[1]).ok_or_else(|| {
+                        at(ParseErrorKind::Syntax {
+                            expected: format!("an object name (a string) and an id (a number) in \"{key}\""),
+                            found: format!("{}, {}", pair[0], pair[1]),
+                        })
                     })
-                }))
+                })
                 .collect::<Result<Vec<_>, _>>()?;
             Action::new(verb, args).map_err(|e| at(ParseErrorKind::WrongArity(e)))
         })
@@ -151,9 +158,11 @@ mod tests {
 
     #[test]
     fn repeated_keys_keep_their_order_and_zero_arg_actions_survive() {
-        let a = parse(r#"{"WALK": ["bathroom", 1], "GRAB": ["soap", 1002], "STANDUP": [], "WALK": ["kitchen", "11"],
-                        "PUTBACK": ["soap", 1002, "washing_machine", 1001]}"#)
-            .unwrap();
+        let a = parse(
+            r#"{"WALK": ["bathroom", 1], "GRAB": ["soap", 1002], "STANDUP": [], "WALK": ["kitchen", "11"],
+                        "PUTBACK": ["soap", 1002, "washing_machine", 1001]}"#,
+        )
+        .unwrap();
         let shown: Vec<String> = a.iter().map(|a| a.to_string()).collect();
         assert_eq!(
             shown,

@@ -68,7 +68,8 @@ mod tests {
         assert_eq!(e.location, Location::Step { step: 1 });
         assert_eq!(e.to_string(), "json plan, step 1: WALK takes 1 object(s), got 0");
 
-        let e = parse("[{\"verb\":\"WALK\",\"args\":[{\"class_name\":\"k\",\"id\":1}]},\n {\"verb\":\"FLY\"}]").unwrap_err();
+        let e = parse("[{\"verb\":\"WALK\",\"args\":[{\"class_name\":\"k\",\"id\":1}]},\n {\"verb\":\"FLY\"}]")
+            .unwrap_err();
         assert_eq!(e.location, Location::Step { step: 2 });
         assert!(e.to_string().contains("unknown action 'FLY'"), "{e}");
 

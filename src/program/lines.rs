@@ -38,11 +38,7 @@ pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
         actions.push(parse_at(line, i + 1)?);
     }
     if actions.is_empty() {
-        return Err(ParseError {
-            format: PlanFormat::Lines,
-            location: Location::Whole,
-            kind: ParseErrorKind::Empty,
-        });
+        return Err(ParseError { format: PlanFormat::Lines, location: Location::Whole, kind: ParseErrorKind::Empty });
     }
     let title = header.first().map(|s| s.to_string());
     let description = (header.len() > 1).then(|| header[1..].join("\n"));
@@ -236,7 +232,10 @@ mod tests {
         // The header ends at the blank line; the next text line must be a step.
         let e = err_of("Title\n\nWALK kitchen\n");
         assert_eq!(e.location, Location::Line { line: 3, column: Some(1) });
-        assert!(e.to_string().contains("expected an action such as `[WALK] <kitchen> (11)`, found 'WALK kitchen'"), "{e}");
+        assert!(
+            e.to_string().contains("expected an action such as `[WALK] <kitchen> (11)`, found 'WALK kitchen'"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -197,8 +197,7 @@ mod tests {
         Program::new(vec![
             Action::new(Verb::Walk, vec![ObjRef::new("kitchen", 11)]).unwrap(),
             Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
-            Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("washing_machine", 1001)])
-                .unwrap(),
+            Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("washing_machine", 1001)]).unwrap(),
             Action::new(Verb::StandUp, vec![]).unwrap(),
             Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
             Action::new(Verb::PlugIn, vec![ObjRef::new("washing_machine", 1001)]).unwrap(),
@@ -213,6 +212,34 @@ mod tests {
             assert_eq!(PlanFormat::detect(&text), f, "{f}: {text}");
             assert_eq!(Program::parse(&text, f).unwrap(), p, "{f}: {text}");
             assert_eq!(Program::parse_auto(&text).unwrap(), p, "{f}: {text}");
+        }
+    }
+
+    fn arb_action() -> impl proptest::strategy::Strategy<Value = Action> {
+        use proptest::prelude::*;
+        let obj = ("[a-z][a-z_]{0,12}", 0u32..100_000).prop_map(|(n, id)| ObjRef::new(n, id));
+        (0..Verb::ALL.len(), proptest::collection::vec(obj, 2)).prop_map(|(v, objs)| {
+            let verb = Verb::ALL[v];
+            Action::new(verb, objs.into_iter().take(verb.arity()).collect()).unwrap()
+        })
+    }
+
+    proptest::proptest! {
+        // A fixed seed keeps the suite deterministic; no regression files are written.
+        #![proptest_config(proptest::test_runner::Config {
+            cases: 200,
+            rng_seed: proptest::test_runner::RngSeed::Fixed(0x5e9),
+            failure_persistence: None,
+            ..proptest::test_runner::Config::default()
+        })]
+        #[test]
+        fn any_plan_round_trips_through_every_format(actions in proptest::collection::vec(arb_action(), 1..20)) {
+            let p = Program::new(actions);
+            for f in PlanFormat::ALL {
+                let text = p.write(f);
+                proptest::prop_assert_eq!(&Program::parse(&text, f).unwrap(), &p);
+                proptest::prop_assert_eq!(PlanFormat::detect(&text), f);
+            }
         }
     }
 

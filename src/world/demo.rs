@@ -42,9 +42,23 @@ mod tests {
     #[test]
     fn demo_scene_loads_with_the_promised_objects() {
         let w = World::demo();
-        for class in ["fridge", "apple", "kitchencounter", "microwave", "kitchencabinet", "kitchentable", "chair",
-            "sink", "faucet", "lightswitch", "light", "sofa", "television", "living_room", "kitchen"]
-        {
+        for class in [
+            "fridge",
+            "apple",
+            "kitchencounter",
+            "microwave",
+            "kitchencabinet",
+            "kitchentable",
+            "chair",
+            "sink",
+            "faucet",
+            "lightswitch",
+            "light",
+            "sofa",
+            "television",
+            "living_room",
+            "kitchen",
+        ] {
             assert!(!w.ids_of_class(class).is_empty(), "missing {class}");
         }
         assert_eq!(w.character_room(), Some(1));
@@ -73,12 +87,16 @@ mod tests {
     #[test]
     fn putting_the_apple_into_a_closed_fridge_says_open_it() {
         let mut w = World::demo();
-        for step in [a(Verb::Walk, &[("apple", 12)]), a(Verb::Grab, &[("apple", 12)]), a(Verb::Walk, &[("fridge", 10)])] {
+        for step in [a(Verb::Walk, &[("apple", 12)]), a(Verb::Grab, &[("apple", 12)]), a(Verb::Walk, &[("fridge", 10)])]
+        {
             w.execute(&step).unwrap();
         }
         let e = w.execute(&a(Verb::PutIn, &[("apple", 12), ("fridge", 10)])).unwrap_err();
         assert_eq!(e.kind, FailureKind::MissingStep);
         assert_eq!(e.eai_kind, FailureKind::Affordance);
-        assert_eq!(e.message, "cannot [PUTIN] <apple> (12) <fridge> (10): <fridge> (10) is CLOSED; OPEN <fridge> (10) first");
+        assert_eq!(
+            e.message,
+            "cannot [PUTIN] <apple> (12) <fridge> (10): <fridge> (10) is CLOSED; OPEN <fridge> (10) first"
+        );
     }
 }

@@ -9,6 +9,11 @@
 //! later step undid) is a wrong-order error, as EAI's temporal-order checker decides it. Where EAI's
 //! label is misleading for a planner (a closed container is an "affordance" error there, an unplugged
 //! appliance an "already satisfied" one), `kind` is ours and `eai_kind` keeps EAI's label.
+//!
+//! Where EAI's executor is more lenient than one might expect, it is followed, because plans are
+//! scored against it: closed doors never block a walk (its door check is disabled), PUTBACK/PUTIN do
+//! not require SURFACES/CONTAINERS on the destination, PUSH does not require MOVABLE, PLUGOUT of an
+//! appliance that is on goes through, STANDUP keeps the robot's ON edge to the seat.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -109,7 +114,10 @@ pub struct Effects {
 impl Effects {
     /// Whether the action changed nothing in the graph (LOOKAT, TOUCH, …).
     pub fn is_empty(&self) -> bool {
-        self.added.is_empty() && self.removed.is_empty() && self.states_added.is_empty() && self.states_removed.is_empty()
+        self.added.is_empty()
+            && self.removed.is_empty()
+            && self.states_added.is_empty()
+            && self.states_removed.is_empty()
     }
 }
 
@@ -230,7 +238,10 @@ impl World {
             Verb::SwitchOn => self.switch(a, true),
             Verb::SwitchOff => self.switch(a, false),
             Verb::Drink => self.drink(a),
-            Verb::TurnTo => Ok(vec![Op::RemoveAll(self.char_ix(), FACING_ONLY, false), Op::Add(self.char_ix(), Relation::Facing, a)]),
+            Verb::TurnTo => Ok(vec![
+                Op::RemoveAll(self.char_ix(), FACING_ONLY, false),
+                Op::Add(self.char_ix(), Relation::Facing, a),
+            ]),
             Verb::LookAt | Verb::LookAtShort | Verb::LookAtLong | Verb::PointAt => self.lookat(a),
             Verb::Wipe => self.wipe(a),
             Verb::PutOn => self.puton(a),
@@ -321,17 +332,18 @@ impl World {
         if self.has_ix(c, Relation::Close, node) {
             return true;
         }
-        self.from_ix(c, Relation::Close).any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
+        self.targets(c, Relation::Close)
+            .any(|x| self.has_ix(x, Relation::Close, node) || self.has_ix(node, Relation::On, x))
     }
 
     /// INSIDE something (not a room) that is CLOSED.
     fn inside_closed(&self, node: Ix) -> Option<Ix> {
-        self.from_ix(node, Relation::Inside).find(|&x| !self.is_room_ix(x) && self.states_ix(x).contains(State::Closed))
+        self.targets(node, Relation::Inside).find(|&x| !self.is_room_ix(x) && self.states_ix(x).contains(State::Closed))
     }
 
     fn free_hand(&self) -> Option<Relation> {
         let c = self.char_ix();
-        HANDS.iter().copied().find(|&h| self.from_ix(c, h).next().is_none())
+        HANDS.iter().copied().find(|&h| self.targets(c, h).next().is_none())
     }
 
     fn holding_hand(&self, node: Ix) -> Option<Relation> {
@@ -341,7 +353,8 @@ impl World {
 
     fn is_facing(&self, node: Ix) -> bool {
         let c = self.char_ix();
-        self.has_ix(c, Relation::Facing, node) || self.from_ix(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
+        self.has_ix(c, Relation::Facing, node)
+            || self.targets(c, Relation::Facing).any(|x| self.has_ix(x, Relation::Facing, node))
     }
 
     fn lbl(&self, ix: Ix) -> String {
@@ -353,15 +366,14 @@ impl World {
             return Ok(());
         }
         let l = self.lbl(node);
-        Err(Fail::new(MissingStep, format!("the robot is not close to {l}; WALK to {l} first")).needs(
-            false,
-            Fact::Edge { from: self.character(), relation: Relation::Close, to: self.id(node) },
-        ))
+        Err(Fail::new(MissingStep, format!("the robot is not close to {l}; WALK to {l} first"))
+            .needs(false, Fact::Edge { from: self.character(), relation: Relation::Close, to: self.id(node) }))
     }
 
     fn need_free_hand(&self) -> Result<Relation, Fail> {
         self.free_hand().ok_or_else(|| {
-            let held: Vec<String> = self.held().iter().map(|&(_, id)| self.node(id).map(|n| n.label()).unwrap_or_default()).collect();
+            let held: Vec<String> =
+                self.held().iter().map(|&(_, id)| self.node(id).map(|n| n.label()).unwrap_or_default()).collect();
             Fail::new(
                 MissingStep,
                 format!(
@@ -387,9 +399,12 @@ impl World {
             None => Ok(()),
             Some(box_ix) => {
                 let b = self.lbl(box_ix);
-                Err(Fail::new(MissingStep, format!("{} is inside {b}, which is CLOSED; OPEN {b} first", self.lbl(node)))
-                    // EAI records the object's own OPEN state here.
-                    .needs(false, Fact::State { id: self.id(node), state: State::Open }))
+                Err(Fail::new(
+                    MissingStep,
+                    format!("{} is inside {b}, which is CLOSED; OPEN {b} first", self.lbl(node)),
+                )
+                // EAI records the object's own OPEN state here.
+                .needs(false, Fact::State { id: self.id(node), state: State::Open }))
             }
         }
     }
@@ -422,11 +437,14 @@ impl World {
         self.not_sitting_or_lying()?;
         let c = self.char_ix();
         let Some(room) = self.room_ix(node) else {
-            return Err(Fail::new(Affordance, format!("{} is not in any room, so it cannot be reached", self.lbl(node))));
+            return Err(Fail::new(
+                Affordance,
+                format!("{} is not in any room, so it cannot be reached", self.lbl(node)),
+            ));
         };
         // Doors are never in the way: VirtualHome's closed-door check is disabled in EAI's executor.
         let old_room = self.room_ix(c);
-        let held: Vec<Ix> = HANDS.iter().flat_map(|&h| self.from_ix(c, h)).collect();
+        let held: Vec<Ix> = HANDS.iter().flat_map(|&h| self.targets(c, h)).collect();
         let mut ops = vec![Op::RemoveAll(c, WALK_CLEARS, true), Op::Add(c, Relation::Inside, room)];
         if room != node {
             ops.push(Op::CloseToContainersOf(c, node));
@@ -481,9 +499,9 @@ impl World {
                 _ => 1,
             }
         };
-        let n = self.to_ix(node, Relation::On).count();
+        let n = self.sources(node, Relation::On).count();
         if n >= max {
-            let on: Vec<String> = self.to_ix(node, Relation::On).take(3).map(|x| self.lbl(x)).collect();
+            let on: Vec<String> = self.sources(node, Relation::On).take(3).map(|x| self.lbl(x)).collect();
             return Err(Fail::new(
                 MissingStep,
                 format!("{} is occupied ({} on it); choose another place", self.lbl(node), on.join(", ")),
@@ -546,18 +564,15 @@ impl World {
         // set of ids, whose order follows `id & mask` for a table sized by the set's length; we take
         // the same order, so that gold programs end in the same state (measured: see world-status).
         let from = [Relation::On, Relation::Inside, Relation::Close].into_iter().find_map(|r| {
-            let ids: Vec<Ix> = self.from_ix(node, r).collect();
+            let ids: Vec<Ix> = self.targets(node, r).collect();
             let mask = py_set_mask(ids.len());
             ids.into_iter()
                 .filter(|&x| !self.is_room_ix(x))
                 .min_by_key(|&x| (self.id(x) as u64 & mask, self.id(x)))
                 .map(|x| (x, r))
         });
-        let mut ops = vec![
-            Op::RemoveAll(node, GRAB_CLEARS, true),
-            Op::AddBoth(c, Relation::Close, node),
-            Op::Add(c, hand, node),
-        ];
+        let mut ops =
+            vec![Op::RemoveAll(node, GRAB_CLEARS, true), Op::AddBoth(c, Relation::Close, node), Op::Add(c, hand, node)];
         if let Some(room) = self.room_ix(c) {
             ops.push(Op::Add(node, Relation::Inside, room));
         }
@@ -682,9 +697,12 @@ impl World {
     fn wipe(&self, node: Ix) -> Check {
         self.need_close(node)?;
         if self.hands_free() {
-            return Err(Fail::new(MissingStep, "the robot holds nothing to wipe with; GRAB a cloth (e.g. a rag or towel) first")
-                .needs(false, Fact::Holds { from: self.character(), to: None })
-                .connective(Connective::Any));
+            return Err(Fail::new(
+                MissingStep,
+                "the robot holds nothing to wipe with; GRAB a cloth (e.g. a rag or towel) first",
+            )
+            .needs(false, Fact::Holds { from: self.character(), to: None })
+            .connective(Connective::Any));
         }
         Ok(clean(node))
     }
@@ -693,7 +711,11 @@ impl World {
         self.need_holding(node)?;
         self.need_prop(node, Property::Clothes, "is not clothing")?;
         let c = self.char_ix();
-        Ok(vec![Op::Add(node, Relation::On, c), Op::Remove(c, Relation::HoldsLh, node), Op::Remove(c, Relation::HoldsRh, node)])
+        Ok(vec![
+            Op::Add(node, Relation::On, c),
+            Op::Remove(c, Relation::HoldsLh, node),
+            Op::Remove(c, Relation::HoldsRh, node),
+        ])
     }
 
     fn putoff(&self, node: Ix) -> Check {
@@ -736,7 +758,10 @@ impl World {
         }
         let dc = self.class_ix(dest);
         if !self.props_ix(dest).contains(Property::Recipient) && !matches!(dc, "hands_both" | "sponge" | "face") {
-            return Err(Fail::new(Affordance, format!("{} cannot receive a pour (it lacks RECIPIENT)", self.lbl(dest))));
+            return Err(Fail::new(
+                Affordance,
+                format!("{} cannot receive a pour (it lacks RECIPIENT)", self.lbl(dest)),
+            ));
         }
         self.need_holding(src)?;
         self.need_close(dest)?;
@@ -770,15 +795,20 @@ impl World {
         let l = self.lbl(node);
         let facing = Fact::Edge { from: self.character(), relation: Relation::Facing, to: self.id(node) };
         if !self.is_facing(node) {
-            return Err(Fail::new(MissingStep, format!("the robot is not facing {l}; TURNTO {l} first")).needs(false, facing));
+            return Err(
+                Fail::new(MissingStep, format!("the robot is not facing {l}; TURNTO {l} first")).needs(false, facing)
+            );
         }
         let s = self.states_ix(c);
         if self.class_ix(node) != "computer"
             && (s.contains(State::Sitting) || s.contains(State::Lying))
             && !self.has_ix(c, Relation::Facing, node)
         {
-            return Err(Fail::new(MissingStep, format!("the robot is not facing {l} from where it sits; TURNTO {l} first"))
-                .needs(false, facing));
+            return Err(Fail::new(
+                MissingStep,
+                format!("the robot is not facing {l} from where it sits; TURNTO {l} first"),
+            )
+            .needs(false, facing));
         }
         self.need_not_inside_closed(node)?;
         Ok(vec![])
@@ -842,7 +872,8 @@ impl World {
             return Err(Fail::new(AdditionalStep, format!("{l} is already unplugged")));
         }
         // EAI lets PLUGOUT of an appliance that is ON go through.
-        let (gone, new) = if plug_in { (State::PluggedOut, State::PluggedIn) } else { (State::PluggedIn, State::PluggedOut) };
+        let (gone, new) =
+            if plug_in { (State::PluggedOut, State::PluggedIn) } else { (State::PluggedIn, State::PluggedOut) };
         Ok(vec![Op::State(node, gone, false), Op::State(node, new, true)])
     }
 
@@ -852,7 +883,7 @@ impl World {
         self.need_prop(node, Property::Eatable, "is not food")?;
         self.need_prop(node, Property::Cuttable, "cannot be cut")?;
         let c = self.char_ix();
-        let has_knife = HANDS.iter().flat_map(|&h| self.from_ix(c, h)).any(|x| self.class_ix(x).contains("knife"));
+        let has_knife = HANDS.iter().flat_map(|&h| self.targets(c, h)).any(|x| self.class_ix(x).contains("knife"));
         if !has_knife {
             return Err(Fail::new(MissingStep, "the robot is not holding a knife; GRAB a knife first"));
         }
@@ -865,7 +896,7 @@ impl World {
             return Ok(vec![]);
         }
         // A plate is "eaten from" if something edible is on it.
-        if self.to_ix(node, Relation::On).any(|x| self.props_ix(x).contains(Property::Eatable)) {
+        if self.sources(node, Relation::On).any(|x| self.props_ix(x).contains(Property::Eatable)) {
             return Ok(vec![]);
         }
         Err(Fail::new(Affordance, format!("{} is not food and has no food on it", self.lbl(node))))
@@ -899,12 +930,12 @@ impl World {
                 Op::Remove(f, r, t) => self.logged_remove(&mut edges_before, f, r, t),
                 Op::RemoveAll(n, rels, reverse) => {
                     for &r in rels {
-                        let outs: Vec<Ix> = self.from_ix(n, r).collect();
+                        let outs: Vec<Ix> = self.targets(n, r).collect();
                         for t in outs {
                             self.logged_remove(&mut edges_before, n, r, t);
                         }
                         if reverse {
-                            let ins: Vec<Ix> = self.to_ix(n, r).collect();
+                            let ins: Vec<Ix> = self.sources(n, r).collect();
                             for f in ins {
                                 self.logged_remove(&mut edges_before, f, r, n);
                             }
@@ -912,15 +943,15 @@ impl World {
                     }
                 }
                 Op::CloseToInsideOf(c, n) => {
-                    let xs: Vec<Ix> = self.to_ix(n, Relation::Inside).collect();
+                    let xs: Vec<Ix> = self.sources(n, Relation::Inside).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToSupportsOf(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::On).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::On).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToContainersOf(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::Inside).filter(|&x| !self.is_room_ix(x)).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::Inside).filter(|&x| !self.is_room_ix(x)).collect();
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::CloseToBodyParts(c) => {
@@ -928,7 +959,7 @@ impl World {
                     self.close_to_all(&mut edges_before, c, &xs);
                 }
                 Op::FaceAsIt(c, n) => {
-                    let xs: Vec<Ix> = self.from_ix(n, Relation::Facing).collect();
+                    let xs: Vec<Ix> = self.targets(n, Relation::Facing).collect();
                     for x in xs {
                         self.logged_add(&mut edges_before, c, Relation::Facing, x);
                     }
@@ -956,13 +987,21 @@ impl World {
             let now = self.has_ix(f, r, t);
             if now != before {
                 let e = (self.id(f), r, self.id(t));
-                if now { fx.added.push(e) } else { fx.removed.push(e) }
+                if now {
+                    fx.added.push(e)
+                } else {
+                    fx.removed.push(e)
+                }
             }
         }
         for ((n, s), before) in states_before {
             let now = self.states_ix(n).contains(s);
             if now != before {
-                if now { fx.states_added.push((self.id(n), s)) } else { fx.states_removed.push((self.id(n), s)) }
+                if now {
+                    fx.states_added.push((self.id(n), s))
+                } else {
+                    fx.states_removed.push((self.id(n), s))
+                }
             }
         }
         fx.added.sort();

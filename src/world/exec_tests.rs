@@ -165,10 +165,22 @@ fn grab_takes_a_free_hand_and_lifts_the_object_off_its_support() {
 #[test]
 fn grab_failures_name_the_fix() {
     let w = kitchen().world();
-    fails(&w, Verb::Grab, &[("apple", 12)], MissingStep, "cannot [GRAB] <apple> (12): the robot is not close to <apple> (12); WALK to <apple> (12) first");
+    fails(
+        &w,
+        Verb::Grab,
+        &[("apple", 12)],
+        MissingStep,
+        "cannot [GRAB] <apple> (12): the robot is not close to <apple> (12); WALK to <apple> (12) first",
+    );
     fails(&w, Verb::Grab, &[("kitchencounter", 7)], Affordance, "cannot be grabbed");
     let w = kitchen().near(5).near(13).world();
-    fails(&w, Verb::Grab, &[("milk", 13)], MissingStep, "inside <fridge> (5), which is CLOSED; OPEN <fridge> (5) first");
+    fails(
+        &w,
+        Verb::Grab,
+        &[("milk", 13)],
+        MissingStep,
+        "inside <fridge> (5), which is CLOSED; OPEN <fridge> (5) first",
+    );
     let w = kitchen()
         .obj(60, "cup", &["GRABBABLE"], &[])
         .obj(61, "plate", &["GRABBABLE"], &[])
@@ -182,7 +194,13 @@ fn grab_failures_name_the_fix() {
 
 #[test]
 fn grab_with_full_hands_after_having_had_a_free_one_is_wrong_order() {
-    let mut w = kitchen().obj(60, "cup", &["GRABBABLE"], &[]).obj(61, "plate", &["GRABBABLE"], &[]).near(60).near(61).near(12).world();
+    let mut w = kitchen()
+        .obj(60, "cup", &["GRABBABLE"], &[])
+        .obj(61, "plate", &["GRABBABLE"], &[])
+        .near(60)
+        .near(61)
+        .near(12)
+        .world();
     ok(&mut w, Verb::Grab, &[("cup", 60)]);
     ok(&mut w, Verb::Grab, &[("plate", 61)]);
     let e = fails(&w, Verb::Grab, &[("apple", 12)], WrongOrder, "both hands are full");
@@ -225,7 +243,13 @@ fn putback_and_putin() {
     assert!(w.has_edge(12, R::On, 8) && w.held().is_empty());
     assert!(fx.added.contains(&(12, R::On, 8)) && fx.removed.contains(&(2, R::HoldsRh, 12)));
     let mut w = kitchen().holding(12).near(5).world();
-    fails(&w, Verb::PutIn, &[("apple", 12), ("fridge", 5)], MissingStep, "<fridge> (5) is CLOSED; OPEN <fridge> (5) first");
+    fails(
+        &w,
+        Verb::PutIn,
+        &[("apple", 12), ("fridge", 5)],
+        MissingStep,
+        "<fridge> (5) is CLOSED; OPEN <fridge> (5) first",
+    );
     ok(&mut w, Verb::Open, &[("fridge", 5)]);
     ok(&mut w, Verb::PutIn, &[("apple", 12), ("fridge", 5)]);
     assert!(w.has_edge(12, R::Inside, 5));
@@ -234,8 +258,20 @@ fn putback_and_putin() {
     ok(&mut w, Verb::Open, &[("fridge", 5)]);
     ok(&mut w, Verb::Close, &[("fridge", 5)]);
     fails(&w, Verb::PutIn, &[("apple", 12), ("fridge", 5)], WrongOrder, "CLOSED");
-    fails(&kitchen().near(7).world(), Verb::PutBack, &[("apple", 12), ("kitchencounter", 7)], MissingStep, "not holding <apple> (12); GRAB <apple> (12) first");
-    fails(&kitchen().holding(12).world(), Verb::PutBack, &[("apple", 12), ("fridge", 5)], MissingStep, "WALK to <fridge> (5) first");
+    fails(
+        &kitchen().near(7).world(),
+        Verb::PutBack,
+        &[("apple", 12), ("kitchencounter", 7)],
+        MissingStep,
+        "not holding <apple> (12); GRAB <apple> (12) first",
+    );
+    fails(
+        &kitchen().holding(12).world(),
+        Verb::PutBack,
+        &[("apple", 12), ("fridge", 5)],
+        MissingStep,
+        "WALK to <fridge> (5) first",
+    );
 }
 
 #[test]
@@ -277,7 +313,11 @@ fn plugin_and_plugout() {
 
 #[test]
 fn sit_lie_standup_sleep_wakeup() {
-    let seat = |g: Scene| g.obj(40, "sofa", &["SITTABLE", "LIEABLE", "SURFACES"], &[]).obj(41, "tv", &["LOOKABLE"], &[]).edge(40, "FACING", 41);
+    let seat = |g: Scene| {
+        g.obj(40, "sofa", &["SITTABLE", "LIEABLE", "SURFACES"], &[])
+            .obj(41, "tv", &["LOOKABLE"], &[])
+            .edge(40, "FACING", 41)
+    };
     let mut w = seat(kitchen()).near(40).world();
     fails(&w, Verb::Sleep, &[], MissingStep, "not lying or sitting");
     fails(&w, Verb::StandUp, &[], AdditionalStep, "not sitting");
@@ -299,13 +339,19 @@ fn sit_lie_standup_sleep_wakeup() {
     fails(&kitchen().near(5).world(), Verb::Lie, &[("fridge", 5)], Affordance, "cannot be lain on");
     fails(&seat(kitchen()).world(), Verb::Sit, &[("sofa", 40)], MissingStep, "WALK to <sofa> (40) first");
     // A chair with a box on it is occupied.
-    let w = kitchen().obj(42, "chair", &["SITTABLE"], &[]).obj(43, "box", &["GRABBABLE"], &[]).edge(43, "ON", 42).near(42).world();
+    let w = kitchen()
+        .obj(42, "chair", &["SITTABLE"], &[])
+        .obj(43, "box", &["GRABBABLE"], &[])
+        .edge(43, "ON", 42)
+        .near(42)
+        .world();
     fails(&w, Verb::Sit, &[("chair", 42)], MissingStep, "occupied (<box> (43) on it)");
 }
 
 #[test]
 fn drink_read_need_the_object_in_hand() {
-    let cup = |g: Scene| g.obj(60, "cup", &["GRABBABLE", "RECIPIENT"], &[]).obj(61, "book", &["GRABBABLE", "READABLE"], &[]);
+    let cup =
+        |g: Scene| g.obj(60, "cup", &["GRABBABLE", "RECIPIENT"], &[]).obj(61, "book", &["GRABBABLE", "READABLE"], &[]);
     let mut w = cup(kitchen()).holding(60).holding(61).world();
     assert!(ok(&mut w, Verb::Drink, &[("cup", 60)]).is_empty());
     assert!(ok(&mut w, Verb::Read, &[("book", 61)]).is_empty());
@@ -396,7 +442,13 @@ fn pour_from_held_into_recipient() {
     fails(&g().near(60).world(), Verb::Pour, &[("milk", 13), ("cup", 60)], MissingStep, "GRAB <milk> (13) first");
     fails(&g().holding(13).world(), Verb::Pour, &[("milk", 13), ("cup", 60)], MissingStep, "WALK to <cup> (60) first");
     fails(&g().holding(12).near(60).world(), Verb::Pour, &[("apple", 12), ("cup", 60)], Affordance, "cannot be poured");
-    fails(&g().holding(13).near(7).world(), Verb::Pour, &[("milk", 13), ("kitchencounter", 7)], Affordance, "lacks RECIPIENT");
+    fails(
+        &g().holding(13).near(7).world(),
+        Verb::Pour,
+        &[("milk", 13), ("kitchencounter", 7)],
+        Affordance,
+        "lacks RECIPIENT",
+    );
 }
 
 #[test]
@@ -413,7 +465,14 @@ fn push_pull_move() {
 
 #[test]
 fn squeeze_cut_eat() {
-    let g = || kitchen().obj(90, "towel", &["GRABBABLE"], &[]).obj(91, "knife", &["GRABBABLE"], &[]).obj(92, "plate", &["SURFACES"], &[]);
+    let g = || {
+        kitchen().obj(90, "towel", &["GRABBABLE"], &[]).obj(91, "knife", &["GRABBABLE"], &[]).obj(
+            92,
+            "plate",
+            &["SURFACES"],
+            &[],
+        )
+    };
     let mut w = g().near(90).near(12).holding(91).world();
     ok(&mut w, Verb::Squeeze, &[("towel", 90)]);
     ok(&mut w, Verb::Cut, &[("apple", 12)]);
@@ -452,10 +511,50 @@ fn every_verb_has_a_test_above() {
     // Guards this file against a verb added to `action.rs` without executor tests: the list must
     // match the verbs exercised here.
     let tested = [
-        "WALK", "RUN", "FIND", "GRAB", "OPEN", "CLOSE", "PUTBACK", "PUTIN", "PUTOBJBACK", "SWITCHON", "SWITCHOFF",
-        "PLUGIN", "PLUGOUT", "SIT", "LIE", "STANDUP", "SLEEP", "WAKEUP", "DRINK", "READ", "TURNTO", "LOOKAT",
-        "LOOKAT_SHORT", "LOOKAT_LONG", "POINTAT", "WATCH", "WIPE", "WASH", "RINSE", "SCRUB", "PUTON", "PUTOFF",
-        "DROP", "RELEASE", "TOUCH", "TYPE", "POUR", "PUSH", "PULL", "MOVE", "SQUEEZE", "CUT", "EAT", "GREET",
+        "WALK",
+        "RUN",
+        "FIND",
+        "GRAB",
+        "OPEN",
+        "CLOSE",
+        "PUTBACK",
+        "PUTIN",
+        "PUTOBJBACK",
+        "SWITCHON",
+        "SWITCHOFF",
+        "PLUGIN",
+        "PLUGOUT",
+        "SIT",
+        "LIE",
+        "STANDUP",
+        "SLEEP",
+        "WAKEUP",
+        "DRINK",
+        "READ",
+        "TURNTO",
+        "LOOKAT",
+        "LOOKAT_SHORT",
+        "LOOKAT_LONG",
+        "POINTAT",
+        "WATCH",
+        "WIPE",
+        "WASH",
+        "RINSE",
+        "SCRUB",
+        "PUTON",
+        "PUTOFF",
+        "DROP",
+        "RELEASE",
+        "TOUCH",
+        "TYPE",
+        "POUR",
+        "PUSH",
+        "PULL",
+        "MOVE",
+        "SQUEEZE",
+        "CUT",
+        "EAT",
+        "GREET",
     ];
     let mut all: Vec<&str> = Verb::ALL.iter().map(|v| v.name()).collect();
     let mut t = tested.to_vec();

@@ -16,7 +16,8 @@ mod tests {
         let progs = Path::new("/work/shared/bench/virtualhome/eai/executable_programs");
         let mut names: Vec<_> = std::fs::read_dir(progs).unwrap().map(|e| e.unwrap().file_name()).collect();
         names.sort();
-        let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match, mut build_ns) = (0, 0, 0u128, 0u128, 0, 0u128);
+        let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match, mut build_ns) =
+            (0, 0, 0u128, 0u128, 0, 0u128);
         for n in names {
             let n = n.to_string_lossy().to_string();
             let stem = n.trim_end_matches(".txt");
@@ -32,7 +33,12 @@ mod tests {
                 for _ in 0..1000 {
                     std::hint::black_box(w.clone());
                 }
-                println!("clone: {:.1} us/clone ({} nodes, {} edges)", tc.elapsed().as_nanos() as f64 / 1e6, w.len(), w.edge_count());
+                println!(
+                    "clone: {:.1} us/clone ({} nodes, {} edges)",
+                    tc.elapsed().as_nanos() as f64 / 1e6,
+                    w.len(),
+                    w.edge_count()
+                );
                 let tf = std::time::Instant::now();
                 let f = w.feasible_actions();
                 println!("feasible_actions: {} actions in {:.1} ms", f.len(), tf.elapsed().as_nanos() as f64 / 1e6);
@@ -45,7 +51,10 @@ mod tests {
                 match w.execute(&a) {
                     Ok(fx) => {
                         if std::env::var("WORLD_GOLD_TRACE").is_ok_and(|t| t == stem) {
-                            println!("{a}: +{:?} -{:?} +{:?} -{:?}", fx.added, fx.removed, fx.states_added, fx.states_removed);
+                            println!(
+                                "{a}: +{:?} -{:?} +{:?} -{:?}",
+                                fx.added, fx.removed, fx.states_added, fx.states_removed
+                            );
                         }
                     }
                     Err(e) if e.eai_kind == crate::world::FailureKind::AdditionalStep => {
@@ -155,7 +164,8 @@ mod diff {
                     json!([n.id, s])
                 })
                 .collect();
-            results.push(json!({"codes": codes, "edges": edges, "states": states}));
+            let char_close = w.related(w.character(), crate::world::Relation::Close);
+            results.push(json!({"codes": codes, "edges": edges, "states": states, "char_close": char_close}));
         }
         std::fs::write(out, serde_json::to_string(&results).unwrap()).unwrap();
     }

@@ -85,10 +85,9 @@ pub fn parse_scene(text: &str, origin: &str) -> Result<SceneFile, GraphError> {
     })?;
     match any {
         AnyScene { init_graph: Some(init), final_graph, .. } => Ok(SceneFile { init, final_graph }),
-        AnyScene { nodes: Some(nodes), edges, .. } => Ok(SceneFile {
-            init: Graph { nodes, edges: edges.unwrap_or_default() },
-            final_graph: None,
-        }),
+        AnyScene { nodes: Some(nodes), edges, .. } => {
+            Ok(SceneFile { init: Graph { nodes, edges: edges.unwrap_or_default() }, final_graph: None })
+        }
         AnyScene { final_graph: Some(_), .. } => Err(GraphError::Shape {
             origin: origin.to_string(),
             detail: "found `final_graph` but no `init_graph`".into(),
@@ -102,8 +101,8 @@ pub fn parse_scene(text: &str, origin: &str) -> Result<SceneFile, GraphError> {
 
 /// Reads and parses a scene file from disk.
 pub fn read_scene(path: &Path) -> Result<SceneFile, GraphError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|source| GraphError::Io { path: path.display().to_string(), source })?;
+    let text =
+        std::fs::read_to_string(path).map_err(|source| GraphError::Io { path: path.display().to_string(), source })?;
     parse_scene(&text, &path.display().to_string())
 }
 

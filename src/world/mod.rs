@@ -12,18 +12,18 @@
 
 pub mod demo;
 pub mod exec;
-pub mod feasible;
-pub mod observe;
 #[cfg(test)]
 mod exec_tests;
-pub mod graph;
+pub mod feasible;
 mod gold_probe;
+pub mod graph;
+pub mod observe;
 pub mod state;
 pub mod vocab;
 
 pub use demo::{demo_kitchen, DEMO_KITCHEN_JSON};
 pub use exec::{Connective, Effects, ExecFailure, Fact, FailureKind, Missing};
-pub use observe::ObjectInfo;
 pub use graph::{parse_scene, read_scene, Edge, Graph, GraphError, Node, SceneFile};
+pub use observe::ObjectInfo;
 pub use state::{NodeView, World};
 pub use vocab::{Property, PropertySet, Relation, State, StateSet};

@@ -55,12 +55,16 @@ impl World {
         }
         let s = self.states_ix(c);
         if s.contains(State::Sitting) || s.contains(State::Lying) {
-            let on: Vec<String> = self.from_ix(c, Relation::On).map(|x| self.label_ix(x)).collect();
+            let on: Vec<String> = self.targets(c, Relation::On).map(|x| self.label_ix(x)).collect();
             let how = if s.contains(State::Lying) { "lying" } else { "sitting" };
-            let _ = write!(robot, "; {how}{}", if on.is_empty() { String::new() } else { format!(" on {}", on.join(", ")) });
+            let _ = write!(
+                robot,
+                "; {how}{}",
+                if on.is_empty() { String::new() } else { format!(" on {}", on.join(", ")) }
+            );
         }
         // Close to: relevant objects by name, the others counted.
-        let close: Vec<Ix> = self.from_ix(c, Relation::Close).filter(|&x| !self.is_room_ix(x)).collect();
+        let close: Vec<Ix> = self.targets(c, Relation::Close).filter(|&x| !self.is_room_ix(x)).collect();
         let named: Vec<String> = close.iter().filter(|x| rel_ix.contains(x)).map(|&x| self.label_ix(x)).collect();
         let others = close.len() - named.len();
         if named.is_empty() {
@@ -74,7 +78,8 @@ impl World {
                 let _ = write!(robot, " and {others} other objects");
             }
         }
-        let facing: Vec<String> = self.from_ix(c, Relation::Facing).filter(|x| rel_ix.contains(x)).map(|x| self.label_ix(x)).collect();
+        let facing: Vec<String> =
+            self.targets(c, Relation::Facing).filter(|x| rel_ix.contains(x)).map(|x| self.label_ix(x)).collect();
         if !facing.is_empty() {
             let _ = write!(robot, "; facing {}", facing.join(", "));
         }
@@ -102,7 +107,7 @@ impl World {
             parts.push("worn by the robot".into());
         }
         for (r, word) in [(Relation::On, "on"), (Relation::Inside, "in")] {
-            let targets: Vec<Ix> = self.from_ix(ix, r).filter(|&t| t != c).collect();
+            let targets: Vec<Ix> = self.targets(ix, r).filter(|&t| t != c).collect();
             // A room is mentioned only when the object is in nothing else.
             let non_room: Vec<Ix> = targets.iter().copied().filter(|&t| !self.is_room_ix(t)).collect();
             let shown = if r == Relation::Inside && non_room.is_empty() { targets } else { non_room };
@@ -111,7 +116,7 @@ impl World {
             }
         }
         for (r, word) in [(Relation::On, "has on it"), (Relation::Inside, "contains")] {
-            let xs: Vec<Ix> = self.to_ix(ix, r).filter(|&x| x != c && !self.is_room_ix(ix)).collect();
+            let xs: Vec<Ix> = self.sources(ix, r).filter(|&x| x != c && !self.is_room_ix(ix)).collect();
             if !xs.is_empty() {
                 parts.push(format!("{word} {}", list(self, &xs)));
             }
@@ -215,7 +220,10 @@ mod tests {
         w.execute(&a(Verb::Grab, &[("apple", 12)])).unwrap();
         let o = w.observe(&[12, 10, 11], 10_000);
         assert!(o.starts_with("robot: in <kitchen> (1); holding <apple> (12) (right hand); close to <kitchencounter> (11), <apple> (12)"), "{o}");
-        assert!(o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"), "{o}");
+        assert!(
+            o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"),
+            "{o}"
+        );
         assert!(o.contains("<kitchencounter> (11): CLEAN; in <kitchen> (1); has on it <milk> (13), <bread> (14), <microwave> (15), <knife> (24), <rag> (26)"), "{o}");
         assert_eq!(o, w.observe(&[11, 10, 12, 12], 10_000), "order and duplicates do not matter");
     }

@@ -106,12 +106,14 @@ impl World {
             ids.push(n.id);
             let mut p = PropertySet::EMPTY;
             for s in &n.properties {
-                let v: Property = s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
+                let v: Property =
+                    s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 p.insert(v);
             }
             let mut st = StateSet::EMPTY;
             for s in &n.states {
-                let v: State = s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
+                let v: State =
+                    s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 st.insert(v);
             }
             class.push(n.class_name.clone());
@@ -126,8 +128,7 @@ impl World {
             .position(|c| c == "character")
             .ok_or_else(|| invalid(origin, "the scene has no node of class 'character' (the robot)".into()))?
             as Ix;
-        let body_parts =
-            (0..ids.len() as Ix).filter(|&i| props[i as usize].contains(Property::BodyPart)).collect();
+        let body_parts = (0..ids.len() as Ix).filter(|&i| props[i as usize].contains(Property::BodyPart)).collect();
         let mut out = vec![Vec::new(); ids.len()];
         let mut inc = vec![Vec::new(); ids.len()];
         for e in &g.edges {
@@ -164,7 +165,8 @@ impl World {
             initial_out,
             initial_states,
         };
-        let mut w = World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
+        let mut w =
+            World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
         w.history.character_hands_were_free = w.hands_free();
         w.history.character_held_something = !w.hands_free();
         Ok(w)
@@ -257,11 +259,11 @@ impl World {
         let hi = list.partition_point(|&(x, _)| x <= r);
         list.get(lo..hi).unwrap_or(&[])
     }
-    pub(crate) fn from_ix(&self, ix: Ix, r: Relation) -> impl Iterator<Item = Ix> + '_ {
+    pub(crate) fn targets(&self, ix: Ix, r: Relation) -> impl Iterator<Item = Ix> + '_ {
         let l = self.out.get(ix as usize).map(Vec::as_slice).unwrap_or(&[]);
         Self::range(l, r).iter().map(|&(_, t)| t)
     }
-    pub(crate) fn to_ix(&self, ix: Ix, r: Relation) -> impl Iterator<Item = Ix> + '_ {
+    pub(crate) fn sources(&self, ix: Ix, r: Relation) -> impl Iterator<Item = Ix> + '_ {
         let l = self.inc.get(ix as usize).map(Vec::as_slice).unwrap_or(&[]);
         Self::range(l, r).iter().map(|&(_, f)| f)
     }
@@ -271,12 +273,12 @@ impl World {
 
     /// Ids `x` with an edge `id r x`, ascending (e.g. what the apple is ON).
     pub fn related(&self, id: u32, r: Relation) -> Vec<u32> {
-        self.ix(id).map(|ix| self.from_ix(ix, r).map(|t| self.id(t)).collect()).unwrap_or_default()
+        self.ix(id).map(|ix| self.targets(ix, r).map(|t| self.id(t)).collect()).unwrap_or_default()
     }
 
     /// Ids `x` with an edge `x r id`, ascending (e.g. what is ON the table).
     pub fn related_to(&self, id: u32, r: Relation) -> Vec<u32> {
-        self.ix(id).map(|ix| self.to_ix(ix, r).map(|f| self.id(f)).collect()).unwrap_or_default()
+        self.ix(id).map(|ix| self.sources(ix, r).map(|f| self.id(f)).collect()).unwrap_or_default()
     }
 
     /// Whether the edge `from r to` exists.
@@ -309,7 +311,7 @@ impl World {
         if self.is_room_ix(ix) {
             return Some(ix);
         }
-        let inside: Vec<Ix> = self.from_ix(ix, Relation::Inside).collect();
+        let inside: Vec<Ix> = self.targets(ix, Relation::Inside).collect();
         if inside.len() > 1 {
             return inside.into_iter().find(|&i| self.is_room_ix(i));
         }
@@ -323,7 +325,7 @@ impl World {
             if steps > self.len() {
                 return None; // an INSIDE cycle: no room
             }
-            cur = self.from_ix(c, Relation::Inside).next();
+            cur = self.targets(c, Relation::Inside).next();
         }
         None
     }
@@ -341,15 +343,15 @@ impl World {
     /// What the character holds: `(HOLDS_RH | HOLDS_LH, object id)`, right hand first.
     pub fn held(&self) -> Vec<(Relation, u32)> {
         let c = self.st.character;
-        self.from_ix(c, Relation::HoldsRh)
+        self.targets(c, Relation::HoldsRh)
             .map(|t| (Relation::HoldsRh, self.id(t)))
-            .chain(self.from_ix(c, Relation::HoldsLh).map(|t| (Relation::HoldsLh, self.id(t))))
+            .chain(self.targets(c, Relation::HoldsLh).map(|t| (Relation::HoldsLh, self.id(t))))
             .collect()
     }
 
     pub(crate) fn hands_free(&self) -> bool {
         let c = self.st.character;
-        self.from_ix(c, Relation::HoldsRh).next().is_none() && self.from_ix(c, Relation::HoldsLh).next().is_none()
+        self.targets(c, Relation::HoldsRh).next().is_none() && self.targets(c, Relation::HoldsLh).next().is_none()
     }
 
     /// The graph of the current state: nodes in id order, edges sorted; properties and states in
@@ -387,10 +389,11 @@ impl World {
         st.initial_out = self.out.clone();
         st.initial_states = self.states.clone();
         self.st = Arc::new(st);
-        let mut h = History::default();
-        h.character_hands_were_free = self.hands_free();
-        h.character_held_something = !self.hands_free();
-        self.history = h;
+        self.history = History {
+            character_hands_were_free: self.hands_free(),
+            character_held_something: !self.hands_free(),
+            ..History::default()
+        };
     }
 
     // ----- history queries (for the wrong-order rule) -----------------------------------------
