@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use llguidance::api::TopLevelGrammar;
-use llguidance::toktrie::{SimpleVob, TokEnv};
+use llguidance::toktrie::{InferenceCapabilities, SimpleVob, TokEnv};
 use llguidance::{Matcher, ParserFactory, TokenParser};
 use toktrie_hf_tokenizers::ByteTokenizer;
 
@@ -140,7 +140,7 @@ impl GrammarCompiler {
         }))
         .map_err(|_| LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into()))?
         .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
-        let mut factory = ParserFactory::new_simple(&tok_env)
+        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &[])
             .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
         factory.quiet();
         Ok(Self {

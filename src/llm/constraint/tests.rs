@@ -84,6 +84,17 @@ fn decode(tokens: &[u32]) -> String {
     test_tokenizer().decode(tokens, false).expect("decode")
 }
 
+/// Each token's text (exact for the ASCII texts these tests use), so the walks build their text
+/// incrementally instead of decoding the whole sequence at every step.
+fn token_text(t: u32) -> &'static str {
+    static TABLE: OnceLock<Vec<String>> = OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        let tok = test_tokenizer();
+        (0..tok.get_vocab_size(true) as u32).map(|t| tok.decode(&[t], false).unwrap_or_default()).collect()
+    });
+    table.get(t as usize).map(String::as_str).unwrap_or("")
+}
+
 #[test]
 fn test_tokenizer_is_deterministic_and_byte_level() {
     let a = build_test_tokenizer();
@@ -114,6 +125,7 @@ fn random_walk(
     accepts: &dyn Fn(&str) -> bool,
 ) -> Result<(Vec<u32>, End), String> {
     let mut out: Vec<u32> = Vec::new();
+    let mut text = String::new();
     let mut logits = vec![0f32; n_vocab];
     while out.len() < cap {
         if c.is_finished() {
@@ -127,11 +139,11 @@ fn random_walk(
             let ff = c.forced_tokens().map_err(|e| e.to_string())?;
             if !ff.is_empty() {
                 out.extend_from_slice(&ff);
+                ff.iter().for_each(|&t| text.push_str(token_text(t)));
                 continue;
             }
         }
         let mask = c.mask().map_err(|e| e.to_string())?;
-        let text = decode(&out);
         if mask.is_allowed(EOS) != accepts(&text) {
             return Err(format!("EOS allowed = {} but the checker says {} for {text:?}", mask.is_allowed(EOS), accepts(&text)));
         }
@@ -165,8 +177,9 @@ fn random_walk(
         }
         c.commit(t).map_err(|e| e.to_string())?;
         out.push(t);
+        text.push_str(token_text(t));
     }
-    Err(format!("no end after {cap} tokens: {:?}", decode(&out)))
+    Err(format!("no end after {cap} tokens: {text:?}"))
 }
 
 #[test]
@@ -335,8 +348,31 @@ fn padded_logits_width_and_bad_eos_are_handled() {
     assert!(GrammarCompiler::new(tok, v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
 }
 
+/// The shipped demo grammar compiles and every random-model output is a plain action list of real
+/// verbs over the demo objects.
+#[test]
+fn demo_grammar_file_yields_parseable_action_lists() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("grammars/actions.lark");
+    let lark = std::fs::read_to_string(path).unwrap();
+    let spec = crate::grammar::demo_kitchen_grammar();
+    let n_vocab = test_tokenizer().get_vocab_size(true) + 5;
+    for seed in 0..20 {
+        let mut k = compiler().compile(&lark).unwrap();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let (tokens, _) = random_walk(&mut k, &mut rng, n_vocab, 4000, &|t: &str| spec.parse(t).is_ok()).unwrap();
+        let text = decode(&tokens);
+        let actions = crate::grammar::parse_actions(&text).unwrap_or_else(|e| panic!("{e}: {text:?}"));
+        assert!((1..=12).contains(&actions.len()), "{text:?}");
+    }
+    assert!(compiler().cache_stats().1 >= 19, "the demo grammar is compiled once");
+}
+
 // ---------------------------------------------------------------------------------------------
 // The "zero grammar errors" property.
+
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(default)
+}
 
 /// Awkward but legal names: quotes, backslashes, digits, underscores, dots, spaces.
 fn name_strategy(chars: &'static str, max: usize) -> impl Strategy<Value = String> {
@@ -400,7 +436,9 @@ fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 300, failure_persistence: None, ..ProptestConfig::default() })]
+    // Each case compiles a fresh grammar (~6 ms, mostly llguidance's Lark front end) and walks it
+    // several times; PROPTEST_CASES raises the count for a deeper run.
+    #![proptest_config(ProptestConfig { cases: cases(160), failure_persistence: None, ..ProptestConfig::default() })]
 
     /// Zero grammar errors: whatever a random model samples under the mask is a sentence of the
     /// grammar's spec (by the independent checker), EOS is allowed exactly where the checker accepts,
@@ -411,7 +449,7 @@ proptest! {
         let c = compiler();
         let n_vocab = test_tokenizer().get_vocab_size(true) + 5;
         let accepts = |t: &str| spec.parse(t).is_ok();
-        for w in 0..3u64 {
+        for w in 0..4u64 {
             let mut k = c.compile(&lark).map_err(|e| TestCaseError::fail(format!("{e}\n{lark}")))?;
             let mut rng = StdRng::seed_from_u64(seed ^ w.wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let (tokens, _end) = random_walk(&mut k, &mut rng, n_vocab, 4000, &accepts)
@@ -428,33 +466,48 @@ proptest! {
     fn every_sentence_of_the_spec_is_reachable(spec in spec_strategy(), seed in any::<u64>()) {
         let lark = spec.to_lark().map_err(|e| TestCaseError::fail(e.to_string()))?;
         let mut rng = StdRng::seed_from_u64(seed);
-        let target = sample_sentence(&spec, &mut rng);
-        prop_assert!(spec.parse(&target).is_ok(), "generator wrote {:?}", target);
-        let mut k = compiler().compile(&lark).map_err(|e| TestCaseError::fail(e.to_string()))?;
-        let mut done: Vec<u32> = Vec::new();
-        for _ in 0..4000 {
-            let so_far = decode(&done);
-            let rest = target.strip_prefix(so_far.as_str())
-                .ok_or_else(|| TestCaseError::fail(format!("{so_far:?} left the target {target:?}")))?;
-            if rest.is_empty() && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false)) {
-                return Ok(());
-            }
-            if rng.random_bool(0.5) {
-                let ff = k.forced_tokens().map_err(|e| TestCaseError::fail(e.to_string()))?;
-                if !ff.is_empty() { done.extend(ff); continue; }
-            }
-            let m = k.mask().map_err(|e| TestCaseError::fail(format!("{e} at {so_far:?} towards {target:?}\n{lark}")))?;
-            let fits: Vec<u32> = m.iter().filter(|&t| t != EOS).filter(|&t| {
-                let s = decode(&[t]);
-                !s.is_empty() && rest.starts_with(&s)
-            }).collect();
-            prop_assert!(!fits.is_empty(), "no allowed token continues {:?} towards {:?}\n{}", so_far, target, lark);
-            let t = fits[rng.random_range(0..fits.len())];
-            k.commit(t).map_err(|e| TestCaseError::fail(e.to_string()))?;
-            done.push(t);
+        for _ in 0..2 {
+            let target = sample_sentence(&spec, &mut rng);
+            prop_assert!(spec.parse(&target).is_ok(), "generator wrote {:?}", target);
+            let k = compiler().compile(&lark).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            guided_walk(k, &target, &mut rng).map_err(|e| TestCaseError::fail(format!("{e}\n{lark}")))?;
         }
-        prop_assert!(false, "did not reach {:?}", target);
     }
+}
+
+/// Drives `k` towards `target`: forced tokens when offered (coin flip), else a random allowed token
+/// whose text continues the target. Fails if no allowed token fits or the target is left.
+fn guided_walk(mut k: Constraint, target: &str, rng: &mut StdRng) -> Result<(), String> {
+    let mut so_far = String::new();
+    for _ in 0..4000 {
+        let rest = target.strip_prefix(so_far.as_str()).ok_or_else(|| format!("{so_far:?} left the target {target:?}"))?;
+        if rest.is_empty() && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false)) {
+            return Ok(());
+        }
+        if rng.random_bool(0.5) {
+            let ff = k.forced_tokens().map_err(|e| e.to_string())?;
+            if !ff.is_empty() {
+                ff.iter().for_each(|&t| so_far.push_str(token_text(t)));
+                continue;
+            }
+        }
+        let m = k.mask().map_err(|e| format!("{e} at {so_far:?} towards {target:?}"))?;
+        let fits: Vec<u32> = m
+            .iter()
+            .filter(|&t| t != EOS)
+            .filter(|&t| {
+                let s = token_text(t);
+                !s.is_empty() && rest.starts_with(s)
+            })
+            .collect();
+        if fits.is_empty() {
+            return Err(format!("no allowed token continues {so_far:?} towards {target:?}"));
+        }
+        let t = fits[rng.random_range(0..fits.len())];
+        k.commit(t).map_err(|e| e.to_string())?;
+        so_far.push_str(token_text(t));
+    }
+    Err(format!("did not reach {target:?}"))
 }
 
 /// A random sentence of the spec, written from the spec directly (not from the Lark text).
