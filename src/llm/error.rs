@@ -15,6 +15,8 @@ pub enum LlmError {
     UnsupportedArch { path: PathBuf, arch: String },
     #[error("{path}: GGUF metadata '{key}' is missing or malformed: {detail}")]
     Metadata { path: PathBuf, key: String, detail: String },
+    #[error("tiny model spec: {0}")]
+    TinySpec(String),
     #[error("tokenizer: {0}")]
     Tokenizer(String),
     #[error("chat template: {0}")]
