@@ -18,6 +18,10 @@ use super::lark::lark_string;
 pub const TEXT_CHARS: &str = "ASCII letters, digits, space and , . ' _ -";
 /// The same class as a regex character class, for the Lark rendering.
 const TEXT_CLASS_REGEX: &str = r"[A-Za-z0-9 ,.'_\-]";
+/// Tokens made only of text characters, up to 10 of them: the grammar engine precomputes this slice of
+/// the vocabulary and allows it in bulk inside a free-text field with at least 10 characters left,
+/// instead of walking the whole vocabulary (about halves the mask time in text on SmolLM2's vocabulary).
+pub const TEXT_SLICE: &str = r"[A-Za-z0-9 ,.'_\-]{1,10}";
 /// Upper bound on a free-text field's length (keeps grammars and generations small).
 pub const MAX_TEXT_CHARS: usize = 1000;
 /// Upper bound on the number of body lines.

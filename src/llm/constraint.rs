@@ -140,7 +140,10 @@ impl GrammarCompiler {
         }))
         .map_err(|_| LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into()))?
         .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
-        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &[])
+        // One vocabulary slice for the planner's free-text class (see `grammar::TEXT_SLICE`) instead of
+        // llguidance's default JSON-string slices, which our grammars never use.
+        let slices = [crate::grammar::TEXT_SLICE.to_string()];
+        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &slices)
             .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
         factory.quiet();
         Ok(Self {
