@@ -125,7 +125,9 @@ impl GrammarCompiler {
             )));
         }
         if eos.is_empty() {
-            return Err(LlmError::Tokenizer("no end-of-sequence token given; constrained decoding needs at least one".into()));
+            return Err(LlmError::Tokenizer(
+                "no end-of-sequence token given; constrained decoding needs at least one".into(),
+            ));
         }
         if let Some(&bad) = eos.iter().find(|&&t| t as usize >= vocab) {
             return Err(LlmError::Tokenizer(format!(
@@ -133,18 +135,32 @@ impl GrammarCompiler {
             )));
         }
         // toktrie_hf_tokenizers asserts on a few malformed vocabularies; turn that into an error.
-        let tok_env: TokEnv = std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
-            let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
-            bt.set_eos_tokens(eos);
-            bt.into_tok_env(Some(n_vocab))
-        }))
-        .map_err(|_| LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into()))?
-        .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
+        let tok_env: TokEnv =
+            std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
+                let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
+                bt.set_eos_tokens(eos);
+                bt.into_tok_env(Some(n_vocab))
+            }))
+            .map_err(|_| {
+                LlmError::Tokenizer(
+                    "the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)"
+                        .into(),
+                )
+            })?
+            .map_err(|e| {
+                LlmError::Tokenizer(format!(
+                    "cannot use this tokenizer for constrained decoding: {e:#}"
+                ))
+            })?;
         // One vocabulary slice for the planner's free-text class (see `grammar::TEXT_SLICE`) instead of
         // llguidance's default JSON-string slices, which our grammars never use.
         let slices = [crate::grammar::TEXT_SLICE.to_string()];
         let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &slices)
-            .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
+            .map_err(|e| {
+            LlmError::Tokenizer(format!(
+                "cannot build the grammar engine for this tokenizer: {e:#}"
+            ))
+        })?;
         factory.quiet();
         Ok(Self {
             factory,
@@ -220,12 +236,15 @@ impl GrammarCompiler {
 /// llguidance reports Lark errors as `LINE(COL): message …` or `at LINE(COL): message …`; say it in
 /// words.
 fn describe_compile_error(msg: &str) -> String {
-    let parsed = msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
-        let (line, col) = pos.split_once('(')?;
-        Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
-    });
+    let parsed =
+        msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
+            let (line, col) = pos.split_once('(')?;
+            Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
+        });
     match parsed {
-        Some((line, col, rest)) => format!("invalid Lark grammar at line {line}, column {col}: {rest}"),
+        Some((line, col, rest)) => {
+            format!("invalid Lark grammar at line {line}, column {col}: {rest}")
+        }
         None => format!("invalid Lark grammar: {msg}"),
     }
 }
@@ -256,11 +275,16 @@ impl Constraint {
             }
             v
         } else {
-            self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
+            self.matcher
+                .compute_mask()
+                .map_err(|e| self.error("no token can continue the text", e))?
         };
         if vob.is_zero() {
             // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
-            return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
+            return Err(LlmError::Decode(format!(
+                "no token can continue the text {:?}",
+                self.text_tail()
+            )));
         }
         let m = TokenMask { vob };
         self.mask = Some(m.clone());
@@ -271,7 +295,10 @@ impl Constraint {
     /// committing an EOS id is a no-op and anything else is an error.
     pub fn commit(&mut self, token: u32) -> Result<()> {
         if token as usize >= self.n_vocab {
-            return Err(LlmError::Decode(format!("token {token} is outside the vocabulary ({} ids)", self.n_vocab)));
+            return Err(LlmError::Decode(format!(
+                "token {token} is outside the vocabulary ({} ids)",
+                self.n_vocab
+            )));
         }
         if self.is_finished() {
             if self.eos.contains(&token) {
@@ -308,7 +335,9 @@ impl Constraint {
         if ff.is_empty() {
             return Ok(ff);
         }
-        self.matcher.consume_tokens(&ff).map_err(|e| self.error("cannot commit forced tokens", e))?;
+        self.matcher
+            .consume_tokens(&ff)
+            .map_err(|e| self.error("cannot commit forced tokens", e))?;
         self.mask = None;
         self.tokens.extend_from_slice(&ff);
         Ok(ff)

@@ -22,8 +22,12 @@ const EOS: u32 = 2;
 /// Corpus for the test tokenizer: script lines and words, so merges look like a real model's
 /// (multi-character tokens spanning brackets, spaces and digits), not one byte per token.
 fn corpus() -> Vec<String> {
-    let verbs = ["WALK", "GRAB", "OPEN", "CLOSE", "PUTIN", "PUTBACK", "SWITCHON", "STANDUP", "FIND", "LOOKAT"];
-    let objs = ["apple", "fridge", "kitchen_counter", "microwave", "cabinet", "table", "plate", "cup"];
+    let verbs = [
+        "WALK", "GRAB", "OPEN", "CLOSE", "PUTIN", "PUTBACK", "SWITCHON", "STANDUP", "FIND",
+        "LOOKAT",
+    ];
+    let objs =
+        ["apple", "fridge", "kitchen_counter", "microwave", "cabinet", "table", "plate", "cup"];
     let mut lines = Vec::new();
     for (i, v) in verbs.iter().enumerate() {
         for (j, o) in objs.iter().enumerate() {
@@ -90,7 +94,9 @@ fn token_text(t: u32) -> &'static str {
     static TABLE: OnceLock<Vec<String>> = OnceLock::new();
     let table = TABLE.get_or_init(|| {
         let tok = test_tokenizer();
-        (0..tok.get_vocab_size(true) as u32).map(|t| tok.decode(&[t], false).unwrap_or_default()).collect()
+        (0..tok.get_vocab_size(true) as u32)
+            .map(|t| tok.decode(&[t], false).unwrap_or_default())
+            .collect()
     });
     table.get(t as usize).map(String::as_str).unwrap_or("")
 }
@@ -99,8 +105,10 @@ fn token_text(t: u32) -> &'static str {
 fn test_tokenizer_is_deterministic_and_byte_level() {
     let a = build_test_tokenizer();
     let b = test_tokenizer();
-    assert_eq!(a.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>(),
-               b.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>());
+    assert_eq!(
+        a.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>(),
+        b.get_vocab(true).into_iter().collect::<std::collections::BTreeMap<_, _>>()
+    );
     assert_eq!(b.token_to_id("<|im_end|>"), Some(EOS));
     let ids = b.encode("[GRAB] <apple> (12)", false).unwrap().get_ids().to_vec();
     assert!(ids.len() < "[GRAB] <apple> (12)".len(), "merges are learnt: {ids:?}");
@@ -127,7 +135,12 @@ struct Vocab<'a> {
 
 fn test_vocab() -> Vocab<'static> {
     static BYTES: fn(u32) -> Vec<u8> = |t| token_text(t).as_bytes().to_vec();
-    Vocab { n_vocab: test_tokenizer().get_vocab_size(true) + 5, eos: EOS, eos_all: vec![EOS], bytes: &BYTES }
+    Vocab {
+        n_vocab: test_tokenizer().get_vocab_size(true) + 5,
+        eos: EOS,
+        eos_all: vec![EOS],
+        bytes: &BYTES,
+    }
 }
 
 /// The decode loop with a random-weight "model": random logits per step from a seeded RNG, the mask
@@ -150,7 +163,10 @@ fn random_walk(
         if c.is_finished() {
             let m = c.mask().map_err(|e| e.to_string())?;
             if m.iter().collect::<Vec<_>>() != v.eos_all {
-                return Err(format!("after the end only EOS may be allowed, got {:?}", m.iter().collect::<Vec<_>>()));
+                return Err(format!(
+                    "after the end only EOS may be allowed, got {:?}",
+                    m.iter().collect::<Vec<_>>()
+                ));
             }
             return Ok((out, End::Finished));
         }
@@ -167,7 +183,11 @@ fn random_walk(
         mask_us.push(t0.elapsed().as_secs_f64() * 1e6);
         let text_s = String::from_utf8_lossy(&text);
         if mask.is_allowed(eos) != accepts(&text_s) {
-            return Err(format!("EOS allowed = {} but the checker says {} for {text_s:?}", mask.is_allowed(eos), accepts(&text_s)));
+            return Err(format!(
+                "EOS allowed = {} but the checker says {} for {text_s:?}",
+                mask.is_allowed(eos),
+                accepts(&text_s)
+            ));
         }
         if mask.is_allowed(eos) != c.is_accepting() {
             return Err(format!("is_accepting disagrees with the mask at {text_s:?}"));
@@ -229,13 +249,24 @@ fn cache_compiles_once_and_hands_out_independent_constraints() {
 fn syntax_errors_name_the_line_and_the_problem() {
     let c = compiler();
     let e = c.compile("start: a\na: \"x\" (\n").err().unwrap().to_string();
-    assert!(e.starts_with("grammar: invalid Lark grammar at line 2, column 9: Expected token ')'"), "{e}");
+    assert!(
+        e.starts_with("grammar: invalid Lark grammar at line 2, column 9: Expected token ')'"),
+        "{e}"
+    );
     let e = c.compile("start: \"a\" | b\n\nb: undefined_rule\n").err().unwrap().to_string();
-    assert!(e.starts_with("grammar: invalid Lark grammar at line 3, column 4: unknown name: \"undefined_rule\""), "{e}");
+    assert!(
+        e.starts_with(
+            "grammar: invalid Lark grammar at line 3, column 4: unknown name: \"undefined_rule\""
+        ),
+        "{e}"
+    );
     let e = c.compile("notstart: \"a\"").err().unwrap().to_string();
     assert!(e.contains("grammar: invalid Lark grammar: no start rule found"), "{e}");
     let e = c.compile("start: /[abc/").err().unwrap().to_string();
-    assert!(e.starts_with("grammar: invalid Lark grammar at line 1, column 8: invalid regex"), "{e}");
+    assert!(
+        e.starts_with("grammar: invalid Lark grammar at line 1, column 8: invalid regex"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -288,7 +319,8 @@ fn grammars_this_vocabulary_cannot_produce_are_errors() {
 
 #[test]
 fn commit_rejects_tokens_outside_the_mask_and_stays_usable() {
-    let mut k = compiler().compile(r#"start: "[WALK] <apple> (1)" | "[WALK] <apple> (2)" "#).unwrap();
+    let mut k =
+        compiler().compile(r#"start: "[WALK] <apple> (1)" | "[WALK] <apple> (2)" "#).unwrap();
     let ff = k.forced_tokens().unwrap();
     assert!(!ff.is_empty());
     let m = k.mask().unwrap();
@@ -300,7 +332,9 @@ fn commit_rejects_tokens_outside_the_mask_and_stays_usable() {
     assert!(!m.is_allowed(EOS), "EOS only where the grammar can end");
     // Still usable: finish the sentence.
     let mut rng = StdRng::seed_from_u64(1);
-    let (rest, _) = random_walk(&mut k, &mut rng, &test_vocab(), 100, &|t: &str| t.ends_with(')'), &mut vec![]).unwrap();
+    let (rest, _) =
+        random_walk(&mut k, &mut rng, &test_vocab(), 100, &|t: &str| t.ends_with(')'), &mut vec![])
+            .unwrap();
     let all: Vec<u32> = ff.iter().chain(&rest).copied().collect();
     let text = decode(&all);
     assert!(text == "[WALK] <apple> (1)" || text == "[WALK] <apple> (2)", "{text:?}");
@@ -364,9 +398,21 @@ fn padded_logits_width_and_bad_eos_are_handled() {
     let m = k.mask().unwrap();
     assert_eq!(m.len(), v + 5);
     assert!((v as u32..(v + 5) as u32).all(|t| !m.is_allowed(t)), "padding ids are never allowed");
-    assert!(GrammarCompiler::new(tok, v - 1, &[EOS]).err().unwrap().to_string().contains("smaller than"));
-    assert!(GrammarCompiler::new(tok, v, &[]).err().unwrap().to_string().contains("no end-of-sequence"));
-    assert!(GrammarCompiler::new(tok, v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
+    assert!(GrammarCompiler::new(tok, v - 1, &[EOS])
+        .err()
+        .unwrap()
+        .to_string()
+        .contains("smaller than"));
+    assert!(GrammarCompiler::new(tok, v, &[])
+        .err()
+        .unwrap()
+        .to_string()
+        .contains("no end-of-sequence"));
+    assert!(GrammarCompiler::new(tok, v + 5, &[v as u32])
+        .err()
+        .unwrap()
+        .to_string()
+        .contains("outside"));
 }
 
 /// The shipped demo grammar compiles and every random-model output is a plain action list of real
@@ -379,9 +425,18 @@ fn demo_grammar_file_yields_parseable_action_lists() {
     for seed in 0..20 {
         let mut k = compiler().compile(&lark).unwrap();
         let mut rng = StdRng::seed_from_u64(seed);
-        let (tokens, _) = random_walk(&mut k, &mut rng, &test_vocab(), 4000, &|t: &str| spec.parse(t).is_ok(), &mut vec![]).unwrap();
+        let (tokens, _) = random_walk(
+            &mut k,
+            &mut rng,
+            &test_vocab(),
+            4000,
+            &|t: &str| spec.parse(t).is_ok(),
+            &mut vec![],
+        )
+        .unwrap();
         let text = decode(&tokens);
-        let actions = crate::grammar::parse_actions(&text).unwrap_or_else(|e| panic!("{e}: {text:?}"));
+        let actions =
+            crate::grammar::parse_actions(&text).unwrap_or_else(|e| panic!("{e}: {text:?}"));
         assert!((1..=12).contains(&actions.len()), "{text:?}");
     }
     assert!(compiler().cache_stats().1 >= 19, "the demo grammar is compiled once");
@@ -412,7 +467,12 @@ fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
         1..6,
     );
     let verbs = prop::collection::vec(
-        (name_strategy("ABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789", 8), 0usize..=2, any::<bool>(), any::<u64>()),
+        (
+            name_strategy("ABCDEFGHIJKLMNOPQRSTUVWXYZ_0123456789", 8),
+            0usize..=2,
+            any::<bool>(),
+            any::<u64>(),
+        ),
         1..6,
     );
     let field = prop_oneof![
@@ -421,38 +481,41 @@ fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
     ];
     let header = prop::collection::vec(field, 0..3);
     let subgoal = prop::option::of(1usize..30);
-    (objects, verbs, header, subgoal, 0usize..3, 0usize..5).prop_map(|(objects, verbs, header, subgoal, min, extra)| {
-        let objects: Vec<ObjRef> = objects.into_iter().map(|(n, id)| ObjRef::new(n, id)).collect();
-        let mut specs: Vec<VerbSpec> = Vec::new();
-        for (i, (name, arity, restrict, bits)) in verbs.into_iter().enumerate() {
-            // Unique names: the index makes them distinct.
-            let mut v = VerbSpec::new(format!("{name}{i}"), arity);
-            // Restrict some verbs (not the first, so a line can always be written) to a subset.
-            if restrict && i > 0 {
-                let slots = (0..arity)
-                    .map(|s| {
-                        objects
-                            .iter()
-                            .enumerate()
-                            .filter(|(j, _)| (bits >> ((s * 13 + j) % 64)) & 1 == 1)
-                            .map(|(_, o)| o.clone())
-                            .collect()
-                    })
-                    .collect();
-                v = v.restricted(slots);
+    (objects, verbs, header, subgoal, 0usize..3, 0usize..5).prop_map(
+        |(objects, verbs, header, subgoal, min, extra)| {
+            let objects: Vec<ObjRef> =
+                objects.into_iter().map(|(n, id)| ObjRef::new(n, id)).collect();
+            let mut specs: Vec<VerbSpec> = Vec::new();
+            for (i, (name, arity, restrict, bits)) in verbs.into_iter().enumerate() {
+                // Unique names: the index makes them distinct.
+                let mut v = VerbSpec::new(format!("{name}{i}"), arity);
+                // Restrict some verbs (not the first, so a line can always be written) to a subset.
+                if restrict && i > 0 {
+                    let slots = (0..arity)
+                        .map(|s| {
+                            objects
+                                .iter()
+                                .enumerate()
+                                .filter(|(j, _)| (bits >> ((s * 13 + j) % 64)) & 1 == 1)
+                                .map(|(_, o)| o.clone())
+                                .collect()
+                        })
+                        .collect();
+                    v = v.restricted(slots);
+                }
+                specs.push(v);
             }
-            specs.push(v);
-        }
-        let mut g = ActionGrammar::new(specs, objects);
-        for (i, f) in header.into_iter().enumerate() {
-            g.header.push(crate::grammar::Field { label: format!("field {i}"), kind: f });
-        }
-        if let Some(k) = subgoal {
-            g = g.subgoals("subgoal", k);
-        }
-        let min = if g.header.is_empty() { min.max(1) } else { min };
-        g.lines(min, (min + extra).max(1))
-    })
+            let mut g = ActionGrammar::new(specs, objects);
+            for (i, f) in header.into_iter().enumerate() {
+                g.header.push(crate::grammar::Field { label: format!("field {i}"), kind: f });
+            }
+            if let Some(k) = subgoal {
+                g = g.subgoals("subgoal", k);
+            }
+            let min = if g.header.is_empty() { min.max(1) } else { min };
+            g.lines(min, (min + extra).max(1))
+        },
+    )
 }
 
 proptest! {
@@ -499,8 +562,12 @@ proptest! {
 fn guided_walk(mut k: Constraint, target: &str, rng: &mut StdRng) -> Result<(), String> {
     let mut so_far = String::new();
     for _ in 0..4000 {
-        let rest = target.strip_prefix(so_far.as_str()).ok_or_else(|| format!("{so_far:?} left the target {target:?}"))?;
-        if rest.is_empty() && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false)) {
+        let rest = target
+            .strip_prefix(so_far.as_str())
+            .ok_or_else(|| format!("{so_far:?} left the target {target:?}"))?;
+        if rest.is_empty()
+            && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false))
+        {
             return Ok(());
         }
         if rng.random_bool(0.5) {
@@ -531,7 +598,8 @@ fn guided_walk(mut k: Constraint, target: &str, rng: &mut StdRng) -> Result<(), 
 
 /// A random sentence of the spec, written from the spec directly (not from the Lark text).
 fn sample_sentence(spec: &ActionGrammar, rng: &mut StdRng) -> String {
-    let text_chars: Vec<char> = ('a'..='z').chain('A'..='Z').chain('0'..='9').chain(" ,.'_-".chars()).collect();
+    let text_chars: Vec<char> =
+        ('a'..='z').chain('A'..='Z').chain('0'..='9').chain(" ,.'_-".chars()).collect();
     assert!(TEXT_CHARS.contains("letters"));
     let text = |rng: &mut StdRng, max: usize| -> String {
         let n = rng.random_range(1..=max);
@@ -575,13 +643,49 @@ fn sample_sentence(spec: &ActionGrammar, rng: &mut StdRng) -> String {
 /// A planner-sized grammar: every verb, 40 objects, a verdict, a reason, subgoal lines.
 fn planner_grammar() -> ActionGrammar {
     let names = [
-        "apple", "fridge", "kitchen_counter", "microwave", "kitchen_cabinet", "kitchen_table", "plate", "cup",
-        "mug", "coffee_maker", "toaster", "bread_slice", "sink", "faucet", "dish_bowl", "fork", "knife",
-        "cutting_board", "stove", "frying_pan", "cooking_pot", "chair", "sofa", "tv", "remote_control",
-        "light_switch", "bathroom", "bedroom", "kitchen", "living_room", "bed", "pillow", "book", "computer",
-        "keyboard", "mouse", "towel", "soap", "washing_machine", "clothes_shirt",
+        "apple",
+        "fridge",
+        "kitchen_counter",
+        "microwave",
+        "kitchen_cabinet",
+        "kitchen_table",
+        "plate",
+        "cup",
+        "mug",
+        "coffee_maker",
+        "toaster",
+        "bread_slice",
+        "sink",
+        "faucet",
+        "dish_bowl",
+        "fork",
+        "knife",
+        "cutting_board",
+        "stove",
+        "frying_pan",
+        "cooking_pot",
+        "chair",
+        "sofa",
+        "tv",
+        "remote_control",
+        "light_switch",
+        "bathroom",
+        "bedroom",
+        "kitchen",
+        "living_room",
+        "bed",
+        "pillow",
+        "book",
+        "computer",
+        "keyboard",
+        "mouse",
+        "towel",
+        "soap",
+        "washing_machine",
+        "clothes_shirt",
     ];
-    let objects: Vec<ObjRef> = names.iter().enumerate().map(|(i, n)| ObjRef::new(*n, 100 + 7 * i as u32)).collect();
+    let objects: Vec<ObjRef> =
+        names.iter().enumerate().map(|(i, n)| ObjRef::new(*n, 100 + 7 * i as u32)).collect();
     ActionGrammar::for_scene(objects)
         .header_choice("verdict", ["decompose", "primitive", "inconsistent"])
         .header_text("reason", 60)
@@ -611,7 +715,9 @@ fn real_vocab_walks(file: &'static str, walks: u64) {
     let mut eos_all = tok.eos_ids().to_vec();
     eos_all.sort();
     let v = Vocab { n_vocab, eos: tok.eos_id(), eos_all, bytes: &bytes };
-    for (name, spec) in [("demo actions", crate::grammar::demo_kitchen_grammar()), ("planner", planner_grammar())] {
+    for (name, spec) in
+        [("demo actions", crate::grammar::demo_kitchen_grammar()), ("planner", planner_grammar())]
+    {
         let lark = spec.to_lark().unwrap();
         let t0 = std::time::Instant::now();
         c.compile(&lark).unwrap();
@@ -620,8 +726,15 @@ fn real_vocab_walks(file: &'static str, walks: u64) {
         for seed in 0..walks {
             let mut k = c.compile(&lark).unwrap();
             let mut rng = StdRng::seed_from_u64(seed);
-            let (out, _) = random_walk(&mut k, &mut rng, &v, 4000, &|t: &str| spec.parse(t).is_ok(), &mut mask_us)
-                .unwrap_or_else(|e| panic!("{file}, {name}: {e}"));
+            let (out, _) = random_walk(
+                &mut k,
+                &mut rng,
+                &v,
+                4000,
+                &|t: &str| spec.parse(t).is_ok(),
+                &mut mask_us,
+            )
+            .unwrap_or_else(|e| panic!("{file}, {name}: {e}"));
             let text = tok.decode(&out, false).unwrap();
             spec.parse(&text).unwrap_or_else(|e| panic!("{file}, {name}: {e}: {text:?}"));
             tokens += out.len();
