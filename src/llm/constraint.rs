@@ -309,7 +309,10 @@ impl Constraint {
                 self.token_dbg(token)
             )));
         }
-        if !self.mask()?.is_allowed(token) {
+        if self.mask.is_none() {
+            self.mask()?;
+        }
+        if !self.mask.as_ref().is_some_and(|m| m.is_allowed(token)) {
             return Err(LlmError::Decode(format!(
                 "token {token} {} is not allowed by the grammar after {:?}",
                 self.token_dbg(token),

@@ -224,6 +224,17 @@ fn random_walk(
     Err(format!("no end after {cap} tokens: {:?}", String::from_utf8_lossy(&text)))
 }
 
+/// The decode loop may compute a mask on another thread while the forward pass runs, and share one
+/// compiler between threads.
+#[test]
+fn constraint_is_send_and_compiler_is_sync() {
+    fn send<T: Send>() {}
+    fn sync<T: Send + Sync>() {}
+    send::<Constraint>();
+    send::<TokenMask>();
+    sync::<GrammarCompiler>();
+}
+
 #[test]
 fn cache_compiles_once_and_hands_out_independent_constraints() {
     let tok = test_tokenizer();
