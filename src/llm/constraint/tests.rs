@@ -2,6 +2,7 @@
 //! errors" property: random grammars of the planner's family, random-weight "models", every output
 //! parses under the grammar's spec by the independent checker in `crate::grammar`.
 
+use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use proptest::prelude::*;
@@ -88,17 +89,28 @@ fn decode(tokens: &[u32]) -> String {
     test_tokenizer().decode(tokens, false).expect("decode")
 }
 
-/// Each token's text (exact for the ASCII texts these tests use), so the walks build their text
-/// incrementally instead of decoding the whole sequence at every step.
-fn token_text(t: u32) -> &'static str {
-    static TABLE: OnceLock<Vec<String>> = OnceLock::new();
+/// Each token's raw bytes (from the byte-level vocabulary strings through GPT-2's byte map), so the
+/// walks build their text incrementally, byte-exact even where a token splits a UTF-8 character.
+fn token_bytes(t: u32) -> &'static [u8] {
+    static TABLE: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
     let table = TABLE.get_or_init(|| {
         let tok = test_tokenizer();
+        let to_byte: HashMap<char, u8> = crate::llm::tokenizer::byte_to_unicode()
+            .iter()
+            .enumerate()
+            .map(|(b, &c)| (c, b as u8))
+            .collect();
         (0..tok.get_vocab_size(true) as u32)
-            .map(|t| tok.decode(&[t], false).unwrap_or_default())
+            .map(|t| {
+                let s = tok.id_to_token(t).unwrap_or_default();
+                s.chars()
+                    .map(|c| to_byte.get(&c).copied())
+                    .collect::<Option<Vec<u8>>>()
+                    .unwrap_or_else(|| s.into_bytes())
+            })
             .collect()
     });
-    table.get(t as usize).map(String::as_str).unwrap_or("")
+    table.get(t as usize).map(Vec::as_slice).unwrap_or(&[])
 }
 
 #[test]
@@ -134,7 +146,7 @@ struct Vocab<'a> {
 }
 
 fn test_vocab() -> Vocab<'static> {
-    static BYTES: fn(u32) -> Vec<u8> = |t| token_text(t).as_bytes().to_vec();
+    static BYTES: fn(u32) -> Vec<u8> = |t| token_bytes(t).to_vec();
     Vocab {
         n_vocab: test_tokenizer().get_vocab_size(true) + 5,
         eos: EOS,
@@ -471,7 +483,7 @@ fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
         (
             prop_oneof![
                 3 => name_strategy("abcdefghij_0123456789", 8),
-                1 => name_strategy("ab_\"'\\. 9", 6),
+                1 => name_strategy("ab_\"'\\. 9éü冷", 6),
             ],
             prop_oneof![0u32..20, 0u32..3000],
         ),
@@ -547,6 +559,7 @@ proptest! {
             let mut rng = StdRng::seed_from_u64(seed ^ w.wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let (tokens, _end) = random_walk(&mut k, &mut rng, &test_vocab(), 4000, &accepts, &mut vec![])
                 .map_err(|e| TestCaseError::fail(format!("{e}\n{lark}")))?;
+            prop_assert!(k.is_accepting(), "the walk ended where the grammar cannot end\n{}", lark);
             let text = decode(&tokens);
             let parsed = spec.parse(&text);
             prop_assert!(parsed.is_ok(), "output {:?} rejected: {:?}\n{}", text, parsed.err(), lark);
@@ -571,11 +584,13 @@ proptest! {
 /// Drives `k` towards `target`: forced tokens when offered (coin flip), else a random allowed token
 /// whose text continues the target. Fails if no allowed token fits or the target is left.
 fn guided_walk(mut k: Constraint, target: &str, rng: &mut StdRng) -> Result<(), String> {
-    let mut so_far = String::new();
+    let target = target.as_bytes();
+    let mut so_far: Vec<u8> = Vec::new();
+    let lossy = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
     for _ in 0..4000 {
         let rest = target
-            .strip_prefix(so_far.as_str())
-            .ok_or_else(|| format!("{so_far:?} left the target {target:?}"))?;
+            .strip_prefix(so_far.as_slice())
+            .ok_or_else(|| format!("{:?} left the target {:?}", lossy(&so_far), lossy(target)))?;
         if rest.is_empty()
             && (k.is_finished() || k.mask().map(|m| m.is_allowed(EOS)).unwrap_or(false))
         {
@@ -584,27 +599,33 @@ fn guided_walk(mut k: Constraint, target: &str, rng: &mut StdRng) -> Result<(), 
         if rng.random_bool(0.5) {
             let ff = k.forced_tokens().map_err(|e| e.to_string())?;
             if !ff.is_empty() {
-                ff.iter().for_each(|&t| so_far.push_str(token_text(t)));
+                ff.iter().for_each(|&t| so_far.extend_from_slice(token_bytes(t)));
                 continue;
             }
         }
-        let m = k.mask().map_err(|e| format!("{e} at {so_far:?} towards {target:?}"))?;
+        let m = k
+            .mask()
+            .map_err(|e| format!("{e} at {:?} towards {:?}", lossy(&so_far), lossy(target)))?;
         let fits: Vec<u32> = m
             .iter()
             .filter(|&t| t != EOS)
             .filter(|&t| {
-                let s = token_text(t);
+                let s = token_bytes(t);
                 !s.is_empty() && rest.starts_with(s)
             })
             .collect();
         if fits.is_empty() {
-            return Err(format!("no allowed token continues {so_far:?} towards {target:?}"));
+            return Err(format!(
+                "no allowed token continues {:?} towards {:?}",
+                lossy(&so_far),
+                lossy(target)
+            ));
         }
         let t = fits[rng.random_range(0..fits.len())];
         k.commit(t).map_err(|e| e.to_string())?;
-        so_far.push_str(token_text(t));
+        so_far.extend_from_slice(token_bytes(t));
     }
-    Err(format!("did not reach {target:?}"))
+    Err(format!("did not reach {:?}", lossy(target)))
 }
 
 /// A random sentence of the spec, written from the spec directly (not from the Lark text).
