@@ -190,7 +190,8 @@ impl GrammarCompiler {
         let mut probe = Matcher::new(Ok(parser.clone()));
         if let Err(e) = probe.compute_mask() {
             return Err(LlmError::Grammar(format!(
-                "grammar cannot be satisfied: no token sequence of this vocabulary can produce it ({e})"
+                "grammar cannot be satisfied: its language is empty or no token of this vocabulary can begin it ({})",
+                first_line(&e)
             )));
         }
         let mut cache = self.lock();
@@ -231,6 +232,14 @@ impl GrammarCompiler {
             tokens: Vec::new(),
         }
     }
+}
+
+/// The first line of an llguidance error: the reason, without the parser-state dump that follows it
+/// (which goes to the debug log).
+fn first_line(e: &anyhow::Error) -> String {
+    let msg = e.to_string();
+    tracing::debug!("llguidance: {msg}");
+    msg.lines().next().unwrap_or_default().trim().to_string()
 }
 
 /// llguidance reports Lark errors as `LINE(COL): message …` or `at LINE(COL): message …`; say it in
@@ -333,6 +342,7 @@ impl Constraint {
         }
         let ff = self.matcher.compute_ff_tokens();
         if let Some(e) = self.matcher.get_error() {
+            let e = e.lines().next().unwrap_or_default().to_string();
             return Err(LlmError::Decode(format!("computing forced tokens: {e}")));
         }
         if ff.is_empty() {
@@ -363,8 +373,9 @@ impl Constraint {
 
     fn error(&self, what: &str, e: anyhow::Error) -> LlmError {
         LlmError::Decode(format!(
-            "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {e}",
-            self.text_tail()
+            "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {}",
+            self.text_tail(),
+            first_line(&e)
         ))
     }
 
