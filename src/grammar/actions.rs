@@ -490,7 +490,9 @@ impl ActionGrammar {
         // Object sets shared between slots with the same allowed objects.
         let mut sets: Vec<&Vec<usize>> = Vec::new();
         let mut action_alts = Vec::new();
-        for v in &r.verbs {
+        // Without body lines the action rules would be unreachable: leave them out.
+        let verbs: &[ResolvedVerb] = if self.max_lines > 0 { &r.verbs } else { &[] };
+        for v in verbs {
             if v.slots.is_empty() {
                 action_alts.push(lark_string(&format!("[{}]", v.name)));
                 continue;

@@ -466,6 +466,27 @@ fn demo_grammar_file_yields_parseable_action_lists() {
     assert!(compiler().cache_stats().1 >= 19, "the demo grammar is compiled once");
 }
 
+/// A verdict-only grammar (header fields, no body lines), as the termination check uses.
+#[test]
+fn header_only_grammar_ends_after_its_fields() {
+    let spec = ActionGrammar::new([VerbSpec::new("WALK", 1)], [ObjRef::new("door", 1)])
+        .header_choice("verdict", ["primitive", "decompose", "inconsistent"])
+        .header_text("reason", 12)
+        .lines(0, 0);
+    let lark = spec.to_lark().unwrap();
+    assert!(!lark.contains("WALK"), "{lark}");
+    for seed in 0..10 {
+        let mut k = compiler().compile(&lark).unwrap();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let accepts = |t: &str| spec.parse(t).is_ok();
+        let (tokens, _) =
+            random_walk(&mut k, &mut rng, &test_vocab(), 400, &accepts, &mut vec![]).unwrap();
+        let p = spec.parse(&decode(&tokens)).unwrap();
+        assert_eq!(p.fields.len(), 2);
+        assert!(p.lines.is_empty());
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // The "zero grammar errors" property.
 
@@ -537,7 +558,9 @@ fn spec_strategy() -> impl Strategy<Value = ActionGrammar> {
                 g = g.subgoals("subgoal", k);
             }
             let min = if g.header.is_empty() { min.max(1) } else { min };
-            g.lines(min, (min + extra).max(1))
+            // With a header, 0..=0 lines (fields only) is allowed too.
+            let max = if g.header.is_empty() { (min + extra).max(1) } else { min + extra };
+            g.lines(min, max)
         },
     )
 }
