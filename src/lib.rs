@@ -13,9 +13,11 @@
 //! - [`grammar`]: Lark grammars built from the embodiment and the scene.
 //! - [`llm`]: the local runtime: GGUF loading, tokenizer and chat template from the GGUF, forward pass,
 //!   sampling, grammar-constrained decoding, prompt-prefix reuse.
+//! - [`bench`]: whole-pipeline measurements behind `step bench` (JSON).
 //! - [`cli`]: the `step` command's subcommands; a thin layer over the library.
 
 pub mod action;
+pub mod bench;
 pub mod cli;
 pub mod eval;
 pub mod grammar;

@@ -1,0 +1,225 @@
+//! The measurements behind `step bench llm`: load time, prefill and decode throughput (unconstrained
+//! and grammar-constrained), per-token mask time, grammar compile time and peak memory, on one model
+//! and one thread count, as JSON. Criterion micro-benchmarks live in `benches/`; this is the
+//! whole-pipeline figure an engineer compares across machines and against llama.cpp.
+//!
+//! Each figure is the median of `runs` repetitions. With `busy_neighbour` a second process keeps every
+//! core busy while we measure, the situation of a robot whose CPU is shared.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::action::ObjRef;
+use crate::grammar::{ActionGrammar, VerbSpec};
+use crate::llm::chat::Message;
+use crate::llm::engine::{Engine, GenOptions, Generate, Generation, Prompt};
+use crate::llm::Result;
+use crate::world::World;
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct LlmBenchConfig {
+    pub runs: usize,
+    pub decode_tokens: usize,
+}
+
+impl Default for LlmBenchConfig {
+    fn default() -> Self {
+        Self { runs: 3, decode_tokens: 64 }
+    }
+}
+
+/// The figures, all medians over the runs.
+#[derive(Clone, Debug, Serialize)]
+pub struct LlmBenchReport {
+    pub model: String,
+    pub threads: usize,
+    pub runs: usize,
+    pub load_ms: f64,
+    pub prompt_tokens: usize,
+    pub prefill_tok_per_s: f64,
+    pub decode_tok_per_s: f64,
+    /// Tokens the model chose per second under the grammar (mask + forward + choice).
+    pub constrained_decode_tok_per_s: f64,
+    /// All output tokens per second under the grammar, forced ones included.
+    pub constrained_output_tok_per_s: f64,
+    /// Extra time per chosen token under the grammar, relative to unconstrained decoding.
+    pub constrained_overhead_pct: f64,
+    pub forced_token_share: f64,
+    pub mask_us_p50: f64,
+    pub mask_us_p99: f64,
+    pub grammar_compile_ms: f64,
+    pub peak_rss_mb: f64,
+}
+
+/// A planner-like prompt of roughly 300 tokens: instructions, the demo scene's objects, a task.
+pub fn bench_prompt(world: &World) -> Prompt {
+    let mut objects = String::new();
+    for o in world.objects() {
+        let props: Vec<String> = o.properties.iter().map(|p| format!("{p:?}").to_lowercase()).collect();
+        objects.push_str(&format!("<{}> ({}): {}\n", o.class_name, o.id, props.join(", ")));
+    }
+    let system = "You are the task planner of a household robot. Decompose the instruction into the \
+                  robot's primitive actions, one per line, in VirtualHome script form: [VERB] <object> (id). \
+                  Only use the objects listed. Walk to an object before grabbing it; open containers \
+                  before putting things in them; close them afterwards.";
+    Prompt::Chat(vec![
+        Message::system(system),
+        Message::user(format!("Objects in the scene:\n{objects}\nInstruction: put the apple in the fridge.")),
+    ])
+}
+
+/// The demo scene's action grammar: every verb, every object, 1 to 8 lines.
+pub fn bench_grammar(world: &World) -> Result<String> {
+    let objects: Vec<ObjRef> = world
+        .objects()
+        .into_iter()
+        .filter(|o| o.class_name != "character")
+        .map(|o| ObjRef::new(o.class_name, o.id))
+        .collect();
+    let verbs = crate::action::Verb::ALL.iter().copied().map(VerbSpec::from);
+    ActionGrammar::new(verbs, objects)
+        .lines(1, 8)
+        .to_lark()
+        .map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))
+}
+
+/// Runs the measurements on a loaded engine.
+pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
+    let world = World::demo();
+    let prompt = bench_prompt(&world);
+    let lark = bench_grammar(&world)?;
+    let runs = cfg.runs.max(1);
+
+    // Grammar compile: a fresh text each time defeats the cache (a trailing comment changes it).
+    let mut compile = Vec::new();
+    for i in 0..runs {
+        let t = Instant::now();
+        engine.grammars().compile(&format!("{lark}\n// run {i}\n"))?;
+        compile.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+
+    let fresh = |max: usize| GenOptions { max_tokens: max, reuse_prefix: false, ..Default::default() };
+    let mut prefill = Vec::new();
+    let mut decode = Vec::new();
+    let mut cdecode = Vec::new();
+    let mut coutput = Vec::new();
+    let mut per_tok_plain = Vec::new();
+    let mut per_tok_constrained = Vec::new();
+    let mut forced_share = Vec::new();
+    let mut masks = Vec::new();
+    let mut prompt_tokens = 0;
+    for _ in 0..runs {
+        let g = engine.generate(&prompt, None, &fresh(cfg.decode_tokens))?;
+        prompt_tokens = g.prompt_tokens;
+        prefill.push(rate(g.prompt_tokens, g.timings.prefill_ms));
+        decode.push(rate(g.tokens.len(), g.timings.decode_ms));
+        per_tok_plain.push(per_token(&g));
+        let c = engine.generate(&prompt, Some(&lark), &fresh(cfg.decode_tokens))?;
+        let chosen = c.tokens.len() - c.forced_tokens;
+        cdecode.push(rate(chosen, c.timings.decode_ms));
+        coutput.push(rate(c.tokens.len(), c.timings.decode_ms));
+        per_tok_constrained.push(per_token(&c));
+        forced_share.push(c.forced_tokens as f64 / c.tokens.len().max(1) as f64);
+        masks.extend_from_slice(&c.timings.mask_us);
+    }
+    let plain = median(&mut per_tok_plain);
+    let constrained = median(&mut per_tok_constrained);
+    Ok(LlmBenchReport {
+        model: engine.path().display().to_string(),
+        threads: candle_core::utils::get_num_threads(),
+        runs,
+        load_ms: engine.load_ms(),
+        prompt_tokens,
+        prefill_tok_per_s: median(&mut prefill),
+        decode_tok_per_s: median(&mut decode),
+        constrained_decode_tok_per_s: median(&mut cdecode),
+        constrained_output_tok_per_s: median(&mut coutput),
+        constrained_overhead_pct: if plain > 0.0 { (constrained / plain - 1.0) * 100.0 } else { 0.0 },
+        forced_token_share: median(&mut forced_share),
+        mask_us_p50: percentile(&mut masks, 0.50),
+        mask_us_p99: percentile(&mut masks, 0.99),
+        grammar_compile_ms: median(&mut compile),
+        peak_rss_mb: peak_rss_mb(),
+    })
+}
+
+/// Decode milliseconds per generated token the model chose (forced tokens are run in batches and
+/// are not a per-token cost).
+fn per_token(g: &Generation) -> f64 {
+    let chosen = (g.tokens.len() - g.forced_tokens).max(1);
+    g.timings.decode_ms / chosen as f64
+}
+
+fn rate(n: usize, ms: f64) -> f64 {
+    if ms > 0.0 {
+        n as f64 / (ms / 1e3)
+    } else {
+        0.0
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    percentile(v, 0.5)
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let i = ((v.len() - 1) as f64 * q).round() as usize;
+    v[i.min(v.len() - 1)]
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), in MB; 0 where unknown.
+pub fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// Keeps one core busy until `seconds` pass: the busy neighbour of `step bench llm --busy-neighbour`,
+/// run in its own process so that it competes as another program would.
+pub fn burn(seconds: f64) {
+    let end = Instant::now() + std::time::Duration::from_secs_f64(seconds);
+    let mut x: u64 = 1;
+    while Instant::now() < end {
+        for _ in 0..100_000 {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        }
+        std::hint::black_box(x);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_pick_ranked_values() {
+        let mut v = vec![5.0, 1.0, 3.0, 2.0, 4.0];
+        assert_eq!(percentile(&mut v, 0.5), 3.0);
+        assert_eq!(percentile(&mut v, 0.99), 5.0);
+        assert_eq!(percentile(&mut v, 0.0), 1.0);
+        assert_eq!(percentile(&mut [], 0.5), 0.0);
+    }
+
+    #[test]
+    fn bench_grammar_and_prompt_come_from_the_demo_scene() {
+        let w = World::demo();
+        let g = bench_grammar(&w).unwrap();
+        assert!(g.contains("apple") && g.contains("fridge"), "{g}");
+        match bench_prompt(&w) {
+            Prompt::Chat(m) => assert!(m[1].content.contains("<apple> (12)")),
+            Prompt::Text(_) => panic!("expected a chat prompt"),
+        }
+    }
+}

@@ -1,0 +1,365 @@
+//! Tasks: a scene, a goal, and optionally a gold plan, from EAI's data set or from a user's task file.
+//!
+//! A task file is a JSON list; each task has `id`, `scene` (a graph JSON file, bare or EAI's
+//! `{init_graph, final_graph}`, relative to the task file; or an EAI task id, whose initial graph is
+//! used), `title`, optional `description`, `vh_goal` in EAI's shape, and optional `gold` program lines.
+//! Everything is checked on load: an unknown object in a goal or a gold step names the task and the id.
+//!
+//! A task's relevant objects follow EAI's rule when there is a final graph (objects whose node or
+//! edges differ between the initial and final graph). Without one (a bare scene, or an EAI scene under
+//! a user's own goal) they are the objects the goal and the gold plan name, the character, and the
+//! rooms all of these are in.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::dataset::{task_id_key, EaiData};
+use super::goal::{Goal, RawGoal};
+use super::EvalError;
+use crate::program::{parse_step_line, Location, ParseError, Program};
+use crate::world::{read_scene, Graph, Node, World};
+
+/// Where a task came from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TaskOrigin {
+    /// EAI's VirtualHome data set.
+    Eai,
+    /// A user's task file.
+    File(PathBuf),
+}
+
+/// One task, ready to run.
+#[derive(Clone, Debug)]
+pub struct Task {
+    pub id: String,
+    pub title: String,
+    pub description: String,
+    pub goal: Goal,
+    /// The gold plan: absent for user tasks without one; an error when EAI's file does not parse.
+    pub gold: Option<Result<Program, ParseError>>,
+    /// The initial state.
+    pub world: World,
+    /// Relevant object ids, ascending (see the module documentation).
+    pub relevant: Vec<u32>,
+    pub origin: TaskOrigin,
+}
+
+/// A node with its property and state lists sorted, for comparing nodes as EAI does.
+fn normalised(n: &Node) -> Node {
+    let mut n = n.clone();
+    n.properties.sort();
+    n.states.sort();
+    n
+}
+
+/// EAI's relevant objects: ids of nodes that differ between the two graphs (or are in one only), and
+/// both ends of every edge that is in one graph only. Ascending.
+pub fn relevant_by_diff(init: &Graph, fin: &Graph) -> Vec<u32> {
+    let a: BTreeMap<u32, Node> = init.nodes.iter().map(|n| (n.id, normalised(n))).collect();
+    let b: BTreeMap<u32, Node> = fin.nodes.iter().map(|n| (n.id, normalised(n))).collect();
+    let mut ids = BTreeSet::new();
+    for (id, n) in &a {
+        if b.get(id) != Some(n) {
+            ids.insert(*id);
+        }
+    }
+    ids.extend(b.keys().filter(|id| !a.contains_key(id)));
+    let ea: BTreeSet<_> = init.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
+    let eb: BTreeSet<_> = fin.edges.iter().map(|e| (e.from_id, e.relation_type.as_str(), e.to_id)).collect();
+    for &(f, _, t) in ea.symmetric_difference(&eb) {
+        ids.insert(f);
+        ids.insert(t);
+    }
+    ids.into_iter().collect()
+}
+
+/// Relevant objects without a final graph: the goal's and gold plan's objects, the character, and
+/// the rooms they are in. Ascending; ids not in the world are left out.
+pub fn relevant_by_goal(world: &World, goal: &Goal, gold: Option<&Program>) -> Vec<u32> {
+    let mut ids: BTreeSet<u32> = goal.object_ids().into_iter().collect();
+    if let Some(p) = gold {
+        ids.extend(p.actions.iter().flat_map(|a| a.args.iter().map(|o| o.id)));
+    }
+    ids.insert(world.character());
+    let rooms: Vec<u32> = ids.iter().filter_map(|&id| world.room_of(id)).collect();
+    ids.extend(rooms);
+    ids.into_iter().filter(|&id| world.node(id).is_some()).collect()
+}
+
+impl Task {
+    /// The relevant objects as `(class_name, id)`, for prompts and reports.
+    pub fn relevant_objects(&self) -> Vec<(String, u32)> {
+        self.relevant
+            .iter()
+            .filter_map(|&id| self.world.node(id).map(|n| (n.class_name.to_string(), id)))
+            .collect()
+    }
+}
+
+/// Loads EAI tasks: all of them, or the given ids (an unknown id is an error listing examples).
+pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<Task>, EvalError> {
+    let metas = data.tasks_meta()?;
+    if let Some(only) = only {
+        let known: BTreeSet<&str> = metas.iter().map(|m| m.id.as_str()).collect();
+        if let Some(bad) = only.iter().find(|id| !known.contains(id.as_str())) {
+            return Err(EvalError::UnknownTask {
+                id: bad.clone(),
+                source_name: format!("EAI's data set at {}", data.root.display()),
+                examples: metas.iter().take(5).map(|m| m.id.clone()).collect(),
+            });
+        }
+    }
+    let metas: BTreeMap<String, _> =
+        metas.into_iter().filter(|m| only.is_none_or(|o| o.contains(&m.id))).map(|m| (m.id.clone(), m)).collect();
+    let scenes = data.scenes(only, |id, scene| {
+        let world = World::from_graph(&scene.init, &format!("EAI task {id}"))?;
+        let relevant = match &scene.final_graph {
+            Some(fin) => relevant_by_diff(&scene.init, fin),
+            None => Vec::new(),
+        };
+        Ok((world, relevant))
+    })?;
+    let mut tasks = Vec::with_capacity(scenes.len());
+    for (id, (world, relevant)) in scenes {
+        let Some(meta) = metas.get(&id) else { continue }; // a scene file with no task entry
+        let goal = meta.goal.to_goal().map_err(|m| EvalError::Data {
+            path: data.root.join("eai/resources/task_state_LTL_formula_accurate.json"),
+            message: format!("task {id}: {m}"),
+        })?;
+        let (description, gold) = match data.program_text(&id) {
+            Ok(text) => {
+                let description = text.lines().nth(1).unwrap_or("").trim().to_string();
+                (description, Some(Program::parse(&text, crate::program::PlanFormat::Lines)))
+            }
+            Err(_) => (String::new(), None),
+        };
+        tasks.push(Task {
+            id,
+            title: meta.task_name.clone(),
+            description,
+            goal,
+            gold,
+            world,
+            relevant,
+            origin: TaskOrigin::Eai,
+        });
+    }
+    Ok(tasks)
+}
+
+/// A task as written in a task file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTask {
+    id: String,
+    scene: String,
+    title: String,
+    #[serde(default)]
+    description: String,
+    vh_goal: RawGoal,
+    #[serde(default)]
+    gold: Option<Vec<String>>,
+}
+
+fn looks_like_eai_id(s: &str) -> bool {
+    let mut parts = s.split('_');
+    let num = |p: Option<&str>| p.is_some_and(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+    num(parts.next()) && num(parts.next()) && parts.next().is_none()
+}
+
+/// Loads and checks a user's task file. `data` is the `--data` directory, used only when a task's
+/// scene is an EAI task id.
+pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalError> {
+    let text = std::fs::read_to_string(path).map_err(|source| EvalError::Io { path: path.to_path_buf(), source })?;
+    let raw: Vec<RawTask> = serde_json::from_str(&text).map_err(|e| EvalError::Json {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        message: format!(
+            "{e} (a task file is a JSON list of {{\"id\", \"scene\", \"title\", \"description\", \"vh_goal\", \"gold\"}})"
+        ),
+    })?;
+    let task_err = |task: &str, message: String| EvalError::Task { file: path.to_path_buf(), task: task.to_string(), message };
+    if raw.is_empty() {
+        return Err(EvalError::Data { path: path.to_path_buf(), message: "the task file lists no tasks".into() });
+    }
+    let mut seen = BTreeSet::new();
+    for t in &raw {
+        if t.id.trim().is_empty() {
+            return Err(task_err(&t.id, "the task id is empty".into()));
+        }
+        if !seen.insert(t.id.as_str()) {
+            return Err(task_err(&t.id, "this id is used by more than one task".into()));
+        }
+    }
+    let base = path.parent().unwrap_or(Path::new("."));
+    // Scenes: files beside the task file, or EAI ids (read from the archive in one pass).
+    let mut eai_ids = BTreeSet::new();
+    let mut files: BTreeMap<String, (World, Option<Vec<u32>>)> = BTreeMap::new();
+    for t in &raw {
+        let p = base.join(&t.scene);
+        if p.is_file() {
+            if !files.contains_key(&t.scene) {
+                let scene = read_scene(&p)?;
+                let world = World::from_graph(&scene.init, &p.display().to_string())?;
+                let rel = scene.final_graph.as_ref().map(|f| relevant_by_diff(&scene.init, f));
+                files.insert(t.scene.clone(), (world, rel));
+            }
+        } else if looks_like_eai_id(&t.scene) {
+            eai_ids.insert(t.scene.clone());
+        } else {
+            return Err(task_err(
+                &t.id,
+                format!(
+                    "scene '{}' is neither a graph file (looked at {}) nor an EAI task id such as 27_2",
+                    t.scene,
+                    p.display()
+                ),
+            ));
+        }
+    }
+    let mut eai_worlds: BTreeMap<String, World> = BTreeMap::new();
+    if !eai_ids.is_empty() {
+        let data = EaiData::open(data)?;
+        let known: BTreeSet<String> = data.tasks_meta()?.into_iter().map(|m| m.id).collect();
+        if let Some(t) = raw.iter().find(|t| eai_ids.contains(&t.scene) && !known.contains(&t.scene)) {
+            return Err(task_err(&t.id, format!("scene '{}' is not an EAI task id (see eai/resources/id2task.json)", t.scene)));
+        }
+        for (id, w) in data.scenes(Some(&eai_ids), |id, s| Ok(World::from_graph(&s.init, &format!("EAI task {id}"))?))? {
+            eai_worlds.insert(id, w);
+        }
+    }
+    let mut tasks = Vec::with_capacity(raw.len());
+    for t in raw {
+        let (world, diff_relevant) = match files.get(&t.scene) {
+            Some((w, rel)) => (w.clone(), rel.clone()),
+            None => match eai_worlds.get(&t.scene) {
+                Some(w) => (w.clone(), None),
+                None => return Err(task_err(&t.id, format!("scene '{}' could not be loaded", t.scene))),
+            },
+        };
+        let goal = t.vh_goal.to_goal().map_err(|m| task_err(&t.id, format!("vh_goal: {m}")))?;
+        check_goal_objects(&world, &goal, &t.scene).map_err(|m| task_err(&t.id, m))?;
+        let gold = match &t.gold {
+            None => None,
+            Some(lines) => {
+                let p = parse_gold(lines).map_err(|e| task_err(&t.id, format!("gold: {e}")))?;
+                check_plan_objects(&world, &p, &t.scene).map_err(|m| task_err(&t.id, format!("gold: {m}")))?;
+                Some(p)
+            }
+        };
+        let relevant = diff_relevant.unwrap_or_else(|| relevant_by_goal(&world, &goal, gold.as_ref()));
+        tasks.push(Task {
+            id: t.id,
+            title: t.title,
+            description: t.description,
+            goal,
+            gold: gold.map(Ok),
+            world,
+            relevant,
+            origin: TaskOrigin::File(path.to_path_buf()),
+        });
+    }
+    tasks.sort_by_key(|t| task_id_key(&t.id));
+    Ok(tasks)
+}
+
+/// Gold steps one per list entry; an error's line is the step number.
+fn parse_gold(lines: &[String]) -> Result<Program, ParseError> {
+    let mut actions = Vec::with_capacity(lines.len());
+    for (i, l) in lines.iter().enumerate() {
+        let a = parse_step_line(l).map_err(|mut e| {
+            if let Location::Line { line, .. } = &mut e.location {
+                *line = i + 1;
+            }
+            e
+        })?;
+        actions.push(a);
+    }
+    Ok(Program::new(actions))
+}
+
+fn check_object(world: &World, id: u32, class_name: &str, scene: &str, what: &str) -> Result<(), String> {
+    match world.node(id) {
+        None => Err(format!("{what} names object id {id} (<{class_name}>), which is not in scene '{scene}'")),
+        Some(n) if n.class_name != class_name => Err(format!(
+            "{what} names <{class_name}> ({id}), but node {id} of scene '{scene}' is <{}>",
+            n.class_name
+        )),
+        Some(_) => Ok(()),
+    }
+}
+
+fn check_goal_objects(world: &World, goal: &Goal, scene: &str) -> Result<(), String> {
+    for n in &goal.nodes {
+        check_object(world, n.id, &n.class_name, scene, "a node goal")?;
+    }
+    for e in &goal.edges {
+        for id in [e.from_id, e.to_id] {
+            if world.node(id).is_none() {
+                return Err(format!(
+                    "the edge goal {} {} {} names object id {id}, which is not in scene '{scene}'",
+                    e.from_id, e.relation_type, e.to_id
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_plan_objects(world: &World, p: &Program, scene: &str) -> Result<(), String> {
+    for (i, a) in p.actions.iter().enumerate() {
+        for o in &a.args {
+            check_object(world, o.id, &o.class_name, scene, &format!("step {} ({a})", i + 1))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::Edge;
+
+    fn n(id: u32, class: &str, states: &[&str]) -> Node {
+        Node {
+            id,
+            class_name: class.into(),
+            category: "Props".into(),
+            properties: vec![],
+            states: states.iter().map(|s| s.to_string()).collect(),
+            prefab_name: None,
+            bounding_box: None,
+            obj_transform: None,
+        }
+    }
+    fn e(f: u32, r: &str, t: u32) -> Edge {
+        Edge { from_id: f, relation_type: r.into(), to_id: t }
+    }
+
+    #[test]
+    fn relevant_objects_follow_eai_diff_rule() {
+        let init = Graph {
+            nodes: vec![n(1, "kitchen", &[]), n(2, "character", &[]), n(3, "fridge", &["CLOSED", "CLEAN"]), n(4, "apple", &[])],
+            edges: vec![e(2, "INSIDE", 1), e(4, "INSIDE", 3), e(3, "INSIDE", 1)],
+        };
+        let mut fin = init.clone();
+        // Same states in another order: not a change.
+        fin.nodes[2].states = vec!["CLEAN".into(), "CLOSED".into()];
+        assert_eq!(relevant_by_diff(&init, &fin), Vec::<u32>::new());
+        // The apple moves from the fridge to the character's hand: 2, 3 and 4 are relevant.
+        fin.edges[1] = e(2, "HOLDS_RH", 4);
+        assert_eq!(relevant_by_diff(&init, &fin), [2, 3, 4]);
+        // A state change makes the kitchen relevant too.
+        fin.nodes[0].states = vec!["DIRTY".into()];
+        assert_eq!(relevant_by_diff(&init, &fin), [1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn eai_ids_are_recognised() {
+        assert!(looks_like_eai_id("27_2") && looks_like_eai_id("1003_1"));
+        assert!(!looks_like_eai_id("27") && !looks_like_eai_id("scene.json") && !looks_like_eai_id("27_2_1"));
+    }
+}

@@ -1,0 +1,225 @@
+//! Plans as text: a [`Program`] is an ordered list of primitive [`Action`]s, read and written in three
+//! forms:
+//! - **lines**: VirtualHome's script lines, one step a line (`[PUTBACK] <soap> (1002) <sink> (1001)`),
+//!   optionally under a title and description as in EAI's `executable_programs/file<id>.txt`;
+//! - **json**: a list of `{"verb": "PUTBACK", "args": [{"class_name": "soap", "id": 1002}, …]}`;
+//! - **eai**: EAI's LLM-output format, an object of action keys in order (keys repeat), values
+//!   `[name, id]`, `[name1, id1, name2, id2]` or `[]`, so plans can be scored by EAI's tools and EAI
+//!   outputs run here.
+//!
+//! Every parse error says where (line and column, or step number) and what was expected.
+
+mod eai;
+mod json;
+mod lines;
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::action::{Action, UnknownVerb, WrongArity};
+
+pub use lines::parse_step_line;
+
+/// The text forms a plan can take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PlanFormat {
+    /// VirtualHome program lines (`[WALK] <kitchen> (11)`), optionally under a title and description.
+    Lines,
+    /// A JSON list of `{verb, args: [{class_name, id}]}`.
+    Json,
+    /// EAI's LLM-output object: `{"WALK": ["kitchen", 11], "STANDUP": [], …}`.
+    Eai,
+}
+
+impl PlanFormat {
+    pub const ALL: [PlanFormat; 3] = [PlanFormat::Lines, PlanFormat::Json, PlanFormat::Eai];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PlanFormat::Lines => "lines",
+            PlanFormat::Json => "json",
+            PlanFormat::Eai => "eai",
+        }
+    }
+
+    /// Guesses the format from the text: an object (possibly in a ```json fence) is EAI's, a list
+    /// whose first element is an object is JSON, anything else is program lines.
+    pub fn detect(text: &str) -> PlanFormat {
+        let t = text.trim_start();
+        let t = t.strip_prefix("```json").or_else(|| t.strip_prefix("```")).unwrap_or(t).trim_start();
+        if t.starts_with('{') {
+            return PlanFormat::Eai;
+        }
+        if let Some(rest) = t.strip_prefix('[') {
+            let rest = rest.trim_start();
+            if rest.starts_with('{') || rest.starts_with(']') {
+                return PlanFormat::Json;
+            }
+        }
+        PlanFormat::Lines
+    }
+}
+
+impl fmt::Display for PlanFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A format name that is not one of `lines`, `json`, `eai`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown plan format '{0}': use lines, json or eai")]
+pub struct UnknownFormat(pub String);
+
+impl FromStr for PlanFormat {
+    type Err = UnknownFormat;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        PlanFormat::ALL
+            .into_iter()
+            .find(|f| f.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| UnknownFormat(s.to_string()))
+    }
+}
+
+/// Where in the text a parse error is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Location {
+    /// 1-based line, and 1-based column (in characters) when it helps.
+    Line { line: usize, column: Option<usize> },
+    /// 1-based step number (for the JSON-shaped formats, whose values carry no position).
+    Step { step: usize },
+    /// The text as a whole.
+    Whole,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Location::Line { line, column: Some(c) } => write!(f, "line {line}, column {c}"),
+            Location::Line { line, column: None } => write!(f, "line {line}"),
+            Location::Step { step } => write!(f, "step {step}"),
+            Location::Whole => f.write_str("plan"),
+        }
+    }
+}
+
+/// What is wrong at a [`Location`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ParseErrorKind {
+    /// The text does not have the expected shape.
+    #[error("expected {expected}, found {found}")]
+    Syntax { expected: String, found: String },
+    #[error("{0}")]
+    UnknownVerb(UnknownVerb),
+    #[error("{0}")]
+    WrongArity(WrongArity),
+    /// The text holds no step at all.
+    #[error("the plan has no steps")]
+    Empty,
+}
+
+/// A plan that could not be read: the format, where, and what was expected.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{format} plan, {location}: {kind}")]
+pub struct ParseError {
+    pub format: PlanFormat,
+    pub location: Location,
+    pub kind: ParseErrorKind,
+}
+
+impl ParseError {
+    fn syntax(format: PlanFormat, location: Location, expected: impl Into<String>, found: impl Into<String>) -> Self {
+        ParseError { format, location, kind: ParseErrorKind::Syntax { expected: expected.into(), found: found.into() } }
+    }
+}
+
+/// A plan: an ordered list of actions, with the title and description a program file may carry.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Program {
+    pub title: Option<String>,
+    pub description: Option<String>,
+    pub actions: Vec<Action>,
+}
+
+impl Program {
+    pub fn new(actions: Vec<Action>) -> Self {
+        Program { title: None, description: None, actions }
+    }
+
+    /// Reads a plan in the given format.
+    pub fn parse(text: &str, format: PlanFormat) -> Result<Program, ParseError> {
+        match format {
+            PlanFormat::Lines => lines::parse(text),
+            PlanFormat::Json => json::parse(text).map(Program::new),
+            PlanFormat::Eai => eai::parse(text).map(Program::new),
+        }
+    }
+
+    /// Reads a plan whose format is guessed with [`PlanFormat::detect`].
+    pub fn parse_auto(text: &str) -> Result<Program, ParseError> {
+        Program::parse(text, PlanFormat::detect(text))
+    }
+
+    /// Writes the plan in the given format. Lines carry the title and description when present.
+    pub fn write(&self, format: PlanFormat) -> String {
+        match format {
+            PlanFormat::Lines => lines::write(self),
+            PlanFormat::Json => json::write(&self.actions),
+            PlanFormat::Eai => eai::write(&self.actions),
+        }
+    }
+}
+
+/// Characters counted from 1, for column numbers.
+fn column_of(line: &str, byte_offset: usize) -> usize {
+    line.get(..byte_offset).map_or(1, |s| s.chars().count() + 1)
+}
+
+/// A short, printable excerpt of what was found, for error messages.
+fn excerpt(s: &str) -> String {
+    let s = s.trim();
+    if s.is_empty() {
+        return "the end of the line".to_string();
+    }
+    let mut out: String = s.chars().take(40).collect();
+    if s.chars().count() > 40 {
+        out.push('…');
+    }
+    format!("'{out}'")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::action::{ObjRef, Verb};
+
+    fn sample() -> Program {
+        Program::new(vec![
+            Action::new(Verb::Walk, vec![ObjRef::new("kitchen", 11)]).unwrap(),
+            Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
+            Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("washing_machine", 1001)])
+                .unwrap(),
+            Action::new(Verb::StandUp, vec![]).unwrap(),
+            Action::new(Verb::Grab, vec![ObjRef::new("soap", 1002)]).unwrap(),
+            Action::new(Verb::PlugIn, vec![ObjRef::new("washing_machine", 1001)]).unwrap(),
+        ])
+    }
+
+    #[test]
+    fn every_format_round_trips_and_is_detected() {
+        let p = sample();
+        for f in PlanFormat::ALL {
+            let text = p.write(f);
+            assert_eq!(PlanFormat::detect(&text), f, "{f}: {text}");
+            assert_eq!(Program::parse(&text, f).unwrap(), p, "{f}: {text}");
+            assert_eq!(Program::parse_auto(&text).unwrap(), p, "{f}: {text}");
+        }
+    }
+
+    #[test]
+    fn format_names_parse() {
+        assert_eq!("EAI".parse::<PlanFormat>().unwrap(), PlanFormat::Eai);
+        let e = "yaml".parse::<PlanFormat>().unwrap_err().to_string();
+        assert!(e.contains("'yaml'") && e.contains("lines, json or eai"), "{e}");
+    }
+}

@@ -1,0 +1,155 @@
+//! Feasible actions: every action, with its objects, that would succeed in the current state.
+//!
+//! The planner builds grammars from this list, so it must agree exactly with the executor: each
+//! candidate is decided by [`World::check`], the executor's own precondition code. The only pruning is
+//! a fact the executor enforces first for PUTBACK, PUTIN and POUR (the first object must be held);
+//! a test compares the pruned list with the brute-force one over all object pairs.
+
+use crate::action::{Action, ObjRef, Verb};
+
+use super::exec::ExecFailure;
+use super::state::World;
+
+impl World {
+    /// Every action that would succeed now, over all objects of the scene (the character excluded).
+    /// Order: verbs as in [`Verb::ALL`], then objects by id (first object, then second).
+    pub fn feasible_actions(&self) -> Vec<Action> {
+        self.feasible_among(None)
+    }
+
+    /// Like [`World::feasible_actions`], with objects restricted to `ids` (e.g. the task's relevant
+    /// objects); ids not in the scene are ignored.
+    pub fn feasible_actions_among(&self, ids: &[u32]) -> Vec<Action> {
+        self.feasible_among(Some(ids))
+    }
+
+    /// Why `action` would not succeed now (`None`: it would).
+    pub fn why_not(&self, action: &Action) -> Option<ExecFailure> {
+        self.check(action).err()
+    }
+
+    fn candidates(&self, ids: Option<&[u32]>) -> Vec<ObjRef> {
+        let ch = self.character();
+        let mut v: Vec<ObjRef> = match ids {
+            None => self.nodes().filter(|n| n.id != ch).map(|n| ObjRef::new(n.class_name, n.id)).collect(),
+            Some(ids) => ids
+                .iter()
+                .filter(|&&id| id != ch)
+                .filter_map(|&id| self.node(id).map(|n| ObjRef::new(n.class_name, n.id)))
+                .collect(),
+        };
+        v.sort_by_key(|o| o.id);
+        v.dedup_by_key(|o| o.id);
+        v
+    }
+
+    fn feasible_among(&self, ids: Option<&[u32]>) -> Vec<Action> {
+        let objs = self.candidates(ids);
+        let held: Vec<ObjRef> = {
+            let mut h: Vec<u32> = self.held().into_iter().map(|(_, id)| id).collect();
+            h.sort_unstable();
+            objs.iter().filter(|o| h.binary_search(&o.id).is_ok()).cloned().collect()
+        };
+        let mut out = Vec::new();
+        for &verb in Verb::ALL {
+            match verb.arity() {
+                0 => push_if_ok(self, &mut out, Action { verb, args: vec![] }),
+                1 => {
+                    for o in &objs {
+                        push_if_ok(self, &mut out, Action { verb, args: vec![o.clone()] });
+                    }
+                }
+                _ => {
+                    // PUTBACK, PUTIN, POUR: the executor refuses them unless the first object is held.
+                    let firsts = if matches!(verb, Verb::PutBack | Verb::PutIn | Verb::Pour) { &held } else { &objs };
+                    for a in firsts {
+                        for b in &objs {
+                            push_if_ok(self, &mut out, Action { verb, args: vec![a.clone(), b.clone()] });
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+fn push_if_ok(w: &World, out: &mut Vec<Action>, a: Action) {
+    if w.check(&a).is_ok() {
+        out.push(a);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn a(verb: Verb, args: &[(&str, u32)]) -> Action {
+        Action::new(verb, args.iter().map(|&(c, i)| ObjRef::new(c, i)).collect()).unwrap()
+    }
+
+    /// All actions over all objects, no pruning: the reference.
+    fn brute_force(w: &World) -> Vec<Action> {
+        let ch = w.character();
+        let objs: Vec<ObjRef> = w.nodes().filter(|n| n.id != ch).map(|n| ObjRef::new(n.class_name, n.id)).collect();
+        let mut out = Vec::new();
+        for &verb in Verb::ALL {
+            let lists: Vec<Vec<ObjRef>> = match verb.arity() {
+                0 => vec![vec![]],
+                1 => objs.iter().map(|o| vec![o.clone()]).collect(),
+                _ => objs.iter().flat_map(|x| objs.iter().map(move |y| vec![x.clone(), y.clone()])).collect(),
+            };
+            for args in lists {
+                let act = Action { verb, args };
+                // The executor itself decides: execute on a copy.
+                if w.clone().execute(&act).is_ok() {
+                    out.push(act);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn feasible_equals_would_execute_on_the_demo_scene_along_a_plan() {
+        let mut w = World::demo();
+        let plan = [
+            a(Verb::Walk, &[("apple", 12)]),
+            a(Verb::Grab, &[("apple", 12)]),
+            a(Verb::Grab, &[("knife", 24)]),
+            a(Verb::Walk, &[("fridge", 10)]),
+            a(Verb::PutBack, &[("knife", 24), ("kitchencounter", 11)]),
+            a(Verb::Open, &[("fridge", 10)]),
+            a(Verb::Walk, &[("sofa", 30)]),
+            a(Verb::Sit, &[("sofa", 30)]),
+        ];
+        let mut states_checked = 0;
+        for step in plan.iter() {
+            let feasible = w.feasible_actions();
+            assert_eq!(feasible, brute_force(&w), "before {step}");
+            assert!(feasible.contains(step), "{step} should be feasible: {:?}", w.why_not(step));
+            w.execute(step).unwrap();
+            states_checked += 1;
+        }
+        assert_eq!(w.feasible_actions(), brute_force(&w));
+        assert_eq!(states_checked, plan.len());
+    }
+
+    #[test]
+    fn feasible_lists_are_deterministic_and_sensible() {
+        let w = World::demo();
+        let f = w.feasible_actions();
+        assert_eq!(f, World::demo().feasible_actions());
+        // Standing in the kitchen, far from everything: walking anywhere works, grabbing nothing does.
+        assert!(f.contains(&a(Verb::Walk, &[("apple", 12)])));
+        assert!(f.contains(&a(Verb::Walk, &[("living_room", 2)])));
+        assert!(!f.iter().any(|x| x.verb == Verb::Grab));
+        assert!(!f.iter().any(|x| x.args.iter().any(|o| o.id == w.character())));
+        let why = w.why_not(&a(Verb::Grab, &[("apple", 12)])).unwrap();
+        assert!(why.message.contains("WALK to <apple> (12) first"), "{}", why.message);
+        // Restricted to two objects.
+        let few = w.feasible_actions_among(&[12, 10, 999]);
+        assert!(few.iter().all(|x| x.args.iter().all(|o| o.id == 12 || o.id == 10)));
+        assert!(few.contains(&a(Verb::Walk, &[("fridge", 10)])));
+    }
+}

@@ -1,0 +1,253 @@
+//! Observations for the planner: a compact, deterministic text view of the state, bounded in size.
+//!
+//! The view names where the robot is, what it holds and what it is close to, then one line per
+//! task-relevant object (its states, what it is on or in, what is on or in it, whether the robot is
+//! close). A byte budget truncates it at a line boundary with a marker saying how much was left out.
+//! The object catalogue (class, id, properties, states) is what grammar building needs.
+
+use std::fmt::Write;
+
+use serde::Serialize;
+
+use super::state::{Ix, World};
+use super::vocab::{Property, Relation, State};
+
+/// One object with what it affords, for grammar building and prompts.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct ObjectInfo {
+    pub id: u32,
+    pub class_name: String,
+    pub category: String,
+    pub properties: Vec<Property>,
+    pub states: Vec<State>,
+}
+
+/// At most this many names in one list (the rest is counted).
+const LIST_MAX: usize = 6;
+
+impl World {
+    /// The state as the planner sees it: the robot, then the objects in `relevant` (ascending id;
+    /// unknown ids are skipped), in at most `budget` bytes. A truncated view ends with a line
+    /// `… (N more objects not shown)`.
+    pub fn observe(&self, relevant: &[u32], budget: usize) -> String {
+        let c = self.char_ix();
+        let mut ids: Vec<u32> = relevant.iter().copied().filter(|&id| id != self.character()).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        let rel_ix: Vec<Ix> = ids.iter().filter_map(|&id| self.ix(id)).collect();
+
+        let mut lines = Vec::with_capacity(rel_ix.len() + 2);
+        let mut robot = String::from("robot: in ");
+        robot.push_str(&self.room_ix(c).map(|r| self.label_ix(r)).unwrap_or_else(|| "no room".into()));
+        let held = self.held();
+        if held.is_empty() {
+            robot.push_str("; hands empty");
+        } else {
+            let hs: Vec<String> = held
+                .iter()
+                .map(|&(h, id)| {
+                    let hand = if h == Relation::HoldsRh { "right" } else { "left" };
+                    format!("{} ({hand} hand)", self.node(id).map(|n| n.label()).unwrap_or_default())
+                })
+                .collect();
+            robot.push_str("; holding ");
+            robot.push_str(&hs.join(", "));
+        }
+        let s = self.states_ix(c);
+        if s.contains(State::Sitting) || s.contains(State::Lying) {
+            let on: Vec<String> = self.from_ix(c, Relation::On).map(|x| self.label_ix(x)).collect();
+            let how = if s.contains(State::Lying) { "lying" } else { "sitting" };
+            let _ = write!(robot, "; {how}{}", if on.is_empty() { String::new() } else { format!(" on {}", on.join(", ")) });
+        }
+        // Close to: relevant objects by name, the others counted.
+        let close: Vec<Ix> = self.from_ix(c, Relation::Close).filter(|&x| !self.is_room_ix(x)).collect();
+        let named: Vec<String> = close.iter().filter(|x| rel_ix.contains(x)).map(|&x| self.label_ix(x)).collect();
+        let others = close.len() - named.len();
+        if named.is_empty() {
+            robot.push_str("; close to no task object");
+            if others > 0 {
+                let _ = write!(robot, " ({others} other objects)");
+            }
+        } else {
+            let _ = write!(robot, "; close to {}", named.join(", "));
+            if others > 0 {
+                let _ = write!(robot, " and {others} other objects");
+            }
+        }
+        let facing: Vec<String> = self.from_ix(c, Relation::Facing).filter(|x| rel_ix.contains(x)).map(|x| self.label_ix(x)).collect();
+        if !facing.is_empty() {
+            let _ = write!(robot, "; facing {}", facing.join(", "));
+        }
+        lines.push(robot);
+
+        for &ix in &rel_ix {
+            lines.push(self.object_line(ix));
+        }
+        bounded(lines, budget)
+    }
+
+    fn object_line(&self, ix: Ix) -> String {
+        let c = self.char_ix();
+        let mut l = self.label_ix(ix);
+        l.push(':');
+        let states: Vec<&str> = self.states_ix(ix).iter().map(|s| s.name()).collect();
+        if !states.is_empty() {
+            let _ = write!(l, " {}", states.join(" "));
+        }
+        let mut parts: Vec<String> = Vec::new();
+        if let Some(h) = [Relation::HoldsRh, Relation::HoldsLh].into_iter().find(|&h| self.has_ix(c, h, ix)) {
+            parts.push(format!("held by the robot ({} hand)", if h == Relation::HoldsRh { "right" } else { "left" }));
+        }
+        if self.has_ix(ix, Relation::On, c) {
+            parts.push("worn by the robot".into());
+        }
+        for (r, word) in [(Relation::On, "on"), (Relation::Inside, "in")] {
+            let targets: Vec<Ix> = self.from_ix(ix, r).filter(|&t| t != c).collect();
+            // A room is mentioned only when the object is in nothing else.
+            let non_room: Vec<Ix> = targets.iter().copied().filter(|&t| !self.is_room_ix(t)).collect();
+            let shown = if r == Relation::Inside && non_room.is_empty() { targets } else { non_room };
+            if !shown.is_empty() {
+                parts.push(format!("{word} {}", list(self, &shown)));
+            }
+        }
+        for (r, word) in [(Relation::On, "has on it"), (Relation::Inside, "contains")] {
+            let xs: Vec<Ix> = self.to_ix(ix, r).filter(|&x| x != c && !self.is_room_ix(ix)).collect();
+            if !xs.is_empty() {
+                parts.push(format!("{word} {}", list(self, &xs)));
+            }
+        }
+        if self.is_close(ix) {
+            parts.push("robot is close".into());
+        }
+        if !parts.is_empty() {
+            let _ = write!(l, "; {}", parts.join("; "));
+        }
+        l
+    }
+
+    /// Every object of the scene except the character, by id: class, category, properties, states.
+    pub fn objects(&self) -> Vec<ObjectInfo> {
+        let ch = self.character();
+        self.nodes()
+            .filter(|n| n.id != ch)
+            .map(|n| ObjectInfo {
+                id: n.id,
+                class_name: n.class_name.to_string(),
+                category: n.category.to_string(),
+                properties: n.properties.iter().collect(),
+                states: n.states.iter().collect(),
+            })
+            .collect()
+    }
+
+    /// The object catalogue as text, one line per object (`<apple> (12): GRABBABLE EATABLE …`), for
+    /// the given ids (all objects when `None`), in at most `budget` bytes.
+    pub fn catalog(&self, ids: Option<&[u32]>, budget: usize) -> String {
+        let objs = self.objects();
+        let lines: Vec<String> = objs
+            .iter()
+            .filter(|o| ids.is_none_or(|ids| ids.contains(&o.id)))
+            .map(|o| {
+                let props: Vec<&str> = o.properties.iter().map(|p| p.name()).collect();
+                let kind = if o.category == "Rooms" { " room" } else { "" };
+                if props.is_empty() {
+                    format!("<{}> ({}):{kind}", o.class_name, o.id)
+                } else {
+                    format!("<{}> ({}):{kind} {}", o.class_name, o.id, props.join(" "))
+                }
+            })
+            .collect();
+        bounded(lines, budget)
+    }
+}
+
+fn list(w: &World, xs: &[Ix]) -> String {
+    let mut names: Vec<String> = xs.iter().take(LIST_MAX).map(|&x| w.label_ix(x)).collect();
+    if xs.len() > LIST_MAX {
+        names.push(format!("{} more", xs.len() - LIST_MAX));
+    }
+    names.join(", ")
+}
+
+/// Joins lines with `\n` while they fit in `budget` bytes, keeping room for the truncation marker.
+fn bounded(lines: Vec<String>, budget: usize) -> String {
+    let total: usize = lines.iter().map(|l| l.len() + 1).sum();
+    if total <= budget {
+        return lines.join("\n");
+    }
+    let mut out = String::new();
+    for (i, l) in lines.iter().enumerate() {
+        let left = lines.len() - i;
+        let marker = format!("… ({left} more lines not shown)");
+        // Keep room for this line, a newline, and the marker that may follow it.
+        if out.len() + l.len() + 1 + marker.len() + 1 > budget {
+            if out.len() + marker.len() <= budget {
+                out.push_str(&marker);
+            }
+            return out;
+        }
+        out.push_str(l);
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::action::{Action, ObjRef, Verb};
+
+    fn a(verb: Verb, args: &[(&str, u32)]) -> Action {
+        Action::new(verb, args.iter().map(|&(c, i)| ObjRef::new(c, i)).collect()).unwrap()
+    }
+
+    #[test]
+    fn observation_shows_robot_and_relevant_objects() {
+        let mut w = World::demo();
+        let o = w.observe(&[12, 10], 10_000);
+        assert_eq!(
+            o,
+            "robot: in <kitchen> (1); hands empty; close to no task object\n\
+             <fridge> (10): CLOSED OFF CLEAN PLUGGED_IN; in <kitchen> (1)\n\
+             <apple> (12): CLEAN; on <kitchencounter> (11); in <kitchen> (1)"
+        );
+        w.execute(&a(Verb::Walk, &[("apple", 12)])).unwrap();
+        w.execute(&a(Verb::Grab, &[("apple", 12)])).unwrap();
+        let o = w.observe(&[12, 10, 11], 10_000);
+        assert!(o.starts_with("robot: in <kitchen> (1); holding <apple> (12) (right hand); close to <kitchencounter> (11), <apple> (12)"), "{o}");
+        assert!(o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"), "{o}");
+        assert!(o.contains("<kitchencounter> (11): CLEAN; in <kitchen> (1); has on it <milk> (13), <bread> (14), <microwave> (15), <knife> (24), <rag> (26)"), "{o}");
+        assert_eq!(o, w.observe(&[11, 10, 12, 12], 10_000), "order and duplicates do not matter");
+    }
+
+    #[test]
+    fn observation_respects_the_budget_with_a_marker() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let full = w.observe(&all, usize::MAX);
+        for budget in [60, 200, 500] {
+            let o = w.observe(&all, budget);
+            assert!(o.len() <= budget, "{} > {budget}", o.len());
+            assert!(o.ends_with("more lines not shown)"), "{o}");
+            let shown: Vec<&str> = o.lines().collect();
+            let (marker, kept) = shown.split_last().unwrap();
+            assert!(full.starts_with(&kept.iter().map(|l| format!("{l}\n")).collect::<String>()));
+            let left = full.lines().count() - kept.len();
+            assert_eq!(*marker, format!("… ({left} more lines not shown)"));
+        }
+        assert!(!full.contains("not shown"));
+    }
+
+    #[test]
+    fn catalog_lists_objects_with_properties() {
+        let w = World::demo();
+        let c = w.catalog(None, usize::MAX);
+        assert!(c.contains("<fridge> (10): CAN_OPEN HAS_SWITCH CONTAINERS HAS_PLUG"), "{c}");
+        assert!(c.contains("<living_room> (2): room"), "{c}");
+        assert!(!c.contains("<character>"));
+        let objs = w.objects();
+        let apple = objs.iter().find(|o| o.id == 12).unwrap();
+        assert!(apple.properties.contains(&Property::Grabbable));
+        assert_eq!(w.catalog(Some(&[12]), 100), "<apple> (12): GRABBABLE EATABLE CUTTABLE MOVABLE");
+    }
+}

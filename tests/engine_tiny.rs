@@ -1,0 +1,172 @@
+//! The whole decode pipeline on tiny random-weight models built here (both architectures): grammar
+//! constrained generation parses, prefix reuse changes nothing but the work done, greedy decoding is
+//! deterministic, and bad input is an error rather than a panic.
+
+use std::path::PathBuf;
+
+use step::action::{ObjRef, Verb};
+use step::grammar::{parse_actions, ActionGrammar, VerbSpec};
+use step::llm::chat::Message;
+use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
+use step::llm::sample::Sampling;
+use step::llm::tiny::{write_tiny_gguf, TinySpec};
+
+fn tiny(spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
+    let path = dir.path().join(format!("tiny-{}-{}.gguf", spec.arch, spec.seed));
+    write_tiny_gguf(&spec, &path).unwrap();
+    path
+}
+
+fn kitchen_grammar() -> String {
+    let objects = vec![
+        ObjRef::new("apple", 12),
+        ObjRef::new("fridge", 5),
+        ObjRef::new("kitchen_counter", 7),
+    ];
+    let verbs = [Verb::Walk, Verb::Grab, Verb::Open, Verb::PutIn, Verb::Close, Verb::StandUp];
+    ActionGrammar::new(verbs.into_iter().map(VerbSpec::from), objects).lines(1, 4).to_lark().unwrap()
+}
+
+fn chat(text: &str) -> Prompt {
+    Prompt::Chat(vec![Message::system("You are a robot planner."), Message::user(text)])
+}
+
+#[test]
+fn constrained_generation_parses_on_both_architectures() {
+    let dir = tempfile::tempdir().unwrap();
+    let lark = kitchen_grammar();
+    for spec in [TinySpec::llama(), TinySpec::qwen2()] {
+        let mut e = Engine::load(&tiny(spec, &dir)).unwrap();
+        let opts = GenOptions { max_tokens: 200, ..Default::default() };
+        let g = e.generate(&chat("put the apple in the fridge"), Some(&lark), &opts).unwrap();
+        assert_ne!(g.stop, StopReason::MaxTokens, "{:?}", g.text);
+        let actions = parse_actions(&g.text)
+            .unwrap_or_else(|err| panic!("output does not parse: {err:?}\n{}", g.text));
+        assert!((1..=4).contains(&actions.len()), "{}", g.text);
+        for a in &actions {
+            assert_eq!(a.args.len(), a.verb.arity());
+        }
+    }
+}
+
+#[test]
+fn sampled_constrained_generation_parses_for_many_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let lark = kitchen_grammar();
+    let mut e = Engine::load(&tiny(TinySpec::llama().with_seed(3), &dir)).unwrap();
+    for seed in 0..20 {
+        let opts = GenOptions {
+            max_tokens: 200,
+            sampling: Sampling::Sample { temperature: 1.5, top_p: 1.0, seed },
+            reuse_prefix: true,
+        };
+        let g = e.generate(&chat("tidy the kitchen"), Some(&lark), &opts).unwrap();
+        parse_actions(&g.text)
+            .unwrap_or_else(|err| panic!("seed {seed}: output does not parse: {err:?}\n{}", g.text));
+    }
+}
+
+#[test]
+fn prefix_reuse_gives_identical_outputs_and_skips_the_shared_prefix() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = tiny(TinySpec::qwen2().with_seed(7), &dir);
+    let lark = kitchen_grammar();
+    let prompts: Vec<Prompt> =
+        ["put the apple in the fridge", "put the apple on the counter", "open the fridge"]
+            .iter()
+            .map(|t| chat(t))
+            .collect();
+    let run = |reuse: bool| {
+        let mut e = Engine::load(&path).unwrap();
+        let opts = GenOptions { max_tokens: 120, sampling: Sampling::Greedy, reuse_prefix: reuse };
+        prompts
+            .iter()
+            .map(|p| e.generate(p, Some(&lark), &opts).unwrap())
+            .collect::<Vec<_>>()
+    };
+    let with = run(true);
+    let without = run(false);
+    for (a, b) in with.iter().zip(&without) {
+        assert_eq!(a.tokens, b.tokens);
+        assert_eq!(b.reused_tokens, 0);
+    }
+    // The system message and chat scaffolding are shared: later calls reuse them.
+    assert_eq!(with[0].reused_tokens, 0);
+    assert!(with[1].reused_tokens > 5, "reused {}", with[1].reused_tokens);
+    assert!(with[2].reused_tokens > 5, "reused {}", with[2].reused_tokens);
+}
+
+#[test]
+fn greedy_is_deterministic_across_engines_and_calls() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = tiny(TinySpec::llama().with_seed(11), &dir);
+    let opts = GenOptions { max_tokens: 24, ..Default::default() };
+    let mut a = Engine::load(&path).unwrap();
+    let mut b = Engine::load(&path).unwrap();
+    let p = Prompt::Text("WALK to the fridge".into());
+    let x = a.generate(&p, None, &opts).unwrap();
+    let y = b.generate(&p, None, &opts).unwrap();
+    let z = a.generate(&p, None, &opts).unwrap();
+    assert_eq!(x.tokens, y.tokens);
+    assert_eq!(x.tokens, z.tokens);
+    assert!(!x.tokens.is_empty());
+}
+
+#[test]
+fn forced_tokens_are_fast_forwarded() {
+    // A grammar with a single sentence: every token is forced, none is chosen by the model.
+    let dir = tempfile::tempdir().unwrap();
+    let mut e = Engine::load(&tiny(TinySpec::llama(), &dir)).unwrap();
+    let g = e
+        .generate(&chat("go"), Some("start: \"[WALK] <fridge> (5)\""), &GenOptions::default())
+        .unwrap();
+    assert_eq!(g.text, "[WALK] <fridge> (5)");
+    assert_eq!(g.forced_tokens, g.tokens.len());
+    assert_eq!(g.stop, StopReason::GrammarComplete);
+    assert!(g.timings.mask_us.is_empty(), "no mask should be computed when all is forced");
+}
+
+#[test]
+fn bad_inputs_are_errors_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut e = Engine::load(&tiny(TinySpec::llama(), &dir)).unwrap();
+    let opts = GenOptions { max_tokens: 8, ..Default::default() };
+    let err = e.generate(&chat("x"), Some("start: (("), &opts).err().unwrap().to_string();
+    assert!(err.contains("grammar"), "{err}");
+    // A grammar that needs more tokens than allowed is an error, not an unparseable output.
+    let err = e
+        .generate(&chat("x"), Some("start: /[a-z]{40}/"), &GenOptions { max_tokens: 3, ..Default::default() })
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("not complete after 3 tokens"), "{err}");
+    // Not a GGUF file.
+    let txt = dir.path().join("model.gguf");
+    std::fs::write(&txt, "hello").unwrap();
+    let err = Engine::load(&txt).err().unwrap().to_string();
+    assert!(err.contains("not a GGUF"), "{err}");
+}
+
+#[test]
+fn same_output_with_one_and_two_threads() {
+    // candle sizes its thread pool once per process, so each thread count runs in its own process.
+    let dir = tempfile::tempdir().unwrap();
+    let path = tiny(TinySpec::qwen2().with_seed(5), &dir);
+    let grammar = dir.path().join("g.lark");
+    std::fs::write(&grammar, kitchen_grammar()).unwrap();
+    let run = |threads: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_step"))
+            .args(["--threads", threads, "generate", "--max-tokens", "64", "--prompt", "open the fridge"])
+            .arg("--model")
+            .arg(&path)
+            .arg("--grammar")
+            .arg(&grammar)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let one = run("1");
+    assert_eq!(one, run("2"));
+    assert!(parse_actions(one.trim_end()).is_ok(), "{one}");
+}

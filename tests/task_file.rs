@@ -1,0 +1,162 @@
+//! Users' own task files (the demo kitchen example under tests/data, and each kind of bad file), and
+//! the `step sim run` / `step eval gold` commands on them. No benchmark data needed.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use step::eval::{score, PlanInput, Summary, TaskSource};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn example() -> PathBuf {
+    repo().join("tests/data/demo_tasks.json")
+}
+
+fn load(path: &Path) -> Result<Vec<step::eval::Task>, step::eval::EvalError> {
+    TaskSource { tasks_file: Some(path.to_path_buf()), data: None }.load(None)
+}
+
+#[test]
+fn the_example_task_file_loads_and_its_gold_plans_succeed() {
+    let tasks = load(&example()).unwrap();
+    let ids: Vec<&str> = tasks.iter().map(|t| t.id.as_str()).collect();
+    assert_eq!(ids, ["apple_in_fridge", "heat_milk", "watch_tv"]);
+    let reports: Vec<_> = tasks
+        .iter()
+        .map(|t| {
+            let plan = match &t.gold {
+                Some(Ok(p)) => PlanInput::Plan(p.clone()),
+                _ => PlanInput::Missing,
+            };
+            score(t, &plan)
+        })
+        .collect();
+    for r in &reports {
+        if r.id != "heat_milk" {
+            assert!(r.success, "{r:?}");
+        }
+    }
+    let s = Summary::of(&reports);
+    assert_eq!((s.tasks, s.executed, s.succeeded), (3, 2, 2));
+    assert_eq!(s.errors.get("no_plan"), Some(&1));
+    // Without a final graph, the relevant objects are the goal's and gold plan's, the robot and rooms.
+    let apple = &tasks[0];
+    assert_eq!(apple.relevant, [1, 3, 10, 12]);
+}
+
+/// Writes a one-task file around `task` (JSON object text) and returns the load error.
+fn error_of(task: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tasks.json");
+    std::fs::write(&path, format!("[{task}]")).unwrap();
+    load(&path).err().map(|e| e.to_string()).unwrap_or_else(|| panic!("no error for {task}"))
+}
+
+fn task(scene: &str, goal: &str, gold: &str) -> String {
+    format!(
+        r#"{{"id": "t1", "scene": "{scene}", "title": "T", "vh_goal": {{"goal": [{goal}], "actions": []}}{gold}}}"#
+    )
+}
+
+fn kitchen() -> String {
+    repo().join("src/world/demo_kitchen.json").display().to_string()
+}
+
+#[test]
+fn an_unknown_object_id_in_a_goal_names_the_task_and_the_id() {
+    let e = error_of(&task(&kitchen(), r#"{"id": 999, "class_name": "apple", "state": "ON"}"#, ""));
+    assert!(e.contains("task 't1'") && e.contains("object id 999"), "{e}");
+    let e = error_of(&task(&kitchen(), r#"{"from_id": 12, "relation_type": "INSIDE", "to_id": 998}"#, ""));
+    assert!(e.contains("task 't1'") && e.contains("object id 998"), "{e}");
+    let e = error_of(&task(&kitchen(), r#"{"id": 12, "class_name": "banana", "state": "ON"}"#, ""));
+    assert!(e.contains("<banana> (12)") && e.contains("is <apple>"), "{e}");
+}
+
+#[test]
+fn bad_goals_and_gold_plans_are_named() {
+    let e = error_of(&task(&kitchen(), r#"{"id": 12, "class_name": "apple", "state": "SHINY"}"#, ""));
+    assert!(e.contains("task 't1': vh_goal: goal 1: unknown state 'SHINY'"), "{e}");
+    let e = error_of(&task(&kitchen(), "", r#", "gold": ["[WALK] <apple> (12)", "[GRAB] <apple>"]"#));
+    assert!(e.contains("task 't1': gold: lines plan, line 2"), "{e}");
+    let e = error_of(&task(&kitchen(), "", r#", "gold": ["[PUTIN] <apple> (12)"]"#));
+    assert!(e.contains("PUTIN takes 2 object(s), got 1"), "{e}");
+    let e = error_of(&task(&kitchen(), "", r#", "gold": ["[WALK] <apple> (12)", "[GRAB] <pear> (777)"]"#));
+    assert!(e.contains("step 2") && e.contains("object id 777"), "{e}");
+}
+
+#[test]
+fn bad_files_and_scenes_say_what_is_wrong() {
+    let e = error_of(&task("no_such_scene.json", "", ""));
+    assert!(e.contains("neither a graph file") && e.contains("no_such_scene.json"), "{e}");
+    let e = error_of(r#"{"id": "t1", "scene": "x", "title": "T", "vh_goals": {}}"#);
+    assert!(e.contains("unknown field `vh_goals`"), "{e}");
+    let e = error_of(r#"{"id": "t1", "scene": "x" "title": "T"}"#);
+    assert!(e.contains("tasks.json:1:"), "{e}");
+    let dup = task(&kitchen(), "", "");
+    let e = error_of(&format!("{dup}, {dup}"));
+    assert!(e.contains("task 't1'") && e.contains("more than one task"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let bad_scene = dir.path().join("scene.json");
+    std::fs::write(&bad_scene, r#"{"nodes": [{"id": 1, "class_name": "kitchen"}], "edges": []}"#).unwrap();
+    let e = error_of(&task(&bad_scene.display().to_string(), "", ""));
+    assert!(e.contains("character"), "a scene without the robot is refused: {e}");
+}
+
+fn step_cmd(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_step")).args(args).output().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn sim_run_prints_each_step_and_the_goal_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.json");
+    // EAI's format, as an LLM would write it.
+    std::fs::write(
+        &plan,
+        r#"{"WALK": ["apple", 12], "GRAB": ["apple", 12], "WALK": ["fridge", 10], "OPEN": ["fridge", 10],
+            "PUTIN": ["apple", 12, "fridge", 10], "CLOSE": ["fridge", 10]}"#,
+    )
+    .unwrap();
+    let ex = example().display().to_string();
+    let p = plan.display().to_string();
+    let (ok, out, err) = step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p]);
+    assert!(ok, "{err}");
+    assert!(out.contains("[PUTIN] <apple> (12) <fridge> (10)") && out.contains("success: yes"), "{out}");
+
+    std::fs::write(&plan, "[GRAB] <apple> (12)\n[WALK] <fridge> (10)\n").unwrap();
+    let (ok, out, _) = step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p, "--format", "lines"]);
+    assert!(ok);
+    assert!(out.contains("FAILED missing_step") && out.contains("1 later step(s) not run"), "{out}");
+    assert!(out.contains("unmet: no edge 12 INSIDE 10") && out.contains("success: no"), "{out}");
+
+    std::fs::write(&plan, "[GRAB] <apple> (12)\n[FLY] <fridge> (10)\n").unwrap();
+    let (ok, _, err) = step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p]);
+    assert!(!ok && err.contains("line 2, column 2: unknown action 'FLY'"), "{err}");
+
+    std::fs::write(&plan, "[WALK] <fridge> (10)\n").unwrap();
+    let (ok, _, err) = step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "nope", "--plan", &p]);
+    assert!(!ok && err.contains("no task 'nope'"), "{err}");
+}
+
+#[test]
+fn eval_gold_reports_counts_as_json_and_missing_data_is_a_clear_error() {
+    let ex = example().display().to_string();
+    let (ok, out, err) = step_cmd(&["eval", "gold", "--tasks-file", &ex, "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["summary"]["tasks"], 3);
+    assert_eq!(v["summary"]["succeeded"], 2);
+    assert_eq!(v["summary"]["errors"]["no_plan"], 1);
+    assert_eq!(v["tasks"].as_array().map(|a| a.len()), Some(3));
+
+    let (ok, out, _) = step_cmd(&["eval", "gold", "--tasks-file", &ex]);
+    assert!(ok && out.contains("task success") && out.contains("2/3") && out.contains("time:"), "{out}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().display().to_string();
+    let (ok, _, err) = step_cmd(&["eval", "gold", "--data", &d]);
+    assert!(!ok && err.contains(&d) && err.contains("--data") && err.contains("STEP_VH_DATA"), "{err}");
+}
