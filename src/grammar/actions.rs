@@ -637,7 +637,7 @@ impl ActionGrammar {
 }
 
 /// The demo kitchen's action grammar (`grammars/actions.lark`): every verb of the embodiment over
-/// the demo scene's objects, 1..=12 lines.
+/// the demo scene's objects, 1..=8 lines (at most ~100 tokens, inside `step generate`'s default budget).
 pub fn demo_kitchen_grammar() -> ActionGrammar {
     let objects = [
         ("apple", 11),
@@ -647,7 +647,7 @@ pub fn demo_kitchen_grammar() -> ActionGrammar {
         ("cabinet", 15),
         ("table", 16),
     ];
-    ActionGrammar::for_scene(objects.map(|(n, id)| ObjRef::new(n, id))).lines(1, 12)
+    ActionGrammar::for_scene(objects.map(|(n, id)| ObjRef::new(n, id))).lines(1, 8)
 }
 
 #[cfg(test)]
