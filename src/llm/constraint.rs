@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use llguidance::api::TopLevelGrammar;
-use llguidance::toktrie::{SimpleVob, TokEnv};
+use llguidance::toktrie::{InferenceCapabilities, SimpleVob, TokEnv};
 use llguidance::{Matcher, ParserFactory, TokenParser};
 use toktrie_hf_tokenizers::ByteTokenizer;
 
@@ -125,7 +125,9 @@ impl GrammarCompiler {
             )));
         }
         if eos.is_empty() {
-            return Err(LlmError::Tokenizer("no end-of-sequence token given; constrained decoding needs at least one".into()));
+            return Err(LlmError::Tokenizer(
+                "no end-of-sequence token given; constrained decoding needs at least one".into(),
+            ));
         }
         if let Some(&bad) = eos.iter().find(|&&t| t as usize >= vocab) {
             return Err(LlmError::Tokenizer(format!(
@@ -133,15 +135,32 @@ impl GrammarCompiler {
             )));
         }
         // toktrie_hf_tokenizers asserts on a few malformed vocabularies; turn that into an error.
-        let tok_env: TokEnv = std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
-            let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
-            bt.set_eos_tokens(eos);
-            bt.into_tok_env(Some(n_vocab))
-        }))
-        .map_err(|_| LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into()))?
-        .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
-        let mut factory = ParserFactory::new_simple(&tok_env)
-            .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
+        let tok_env: TokEnv =
+            std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
+                let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
+                bt.set_eos_tokens(eos);
+                bt.into_tok_env(Some(n_vocab))
+            }))
+            .map_err(|_| {
+                LlmError::Tokenizer(
+                    "the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)"
+                        .into(),
+                )
+            })?
+            .map_err(|e| {
+                LlmError::Tokenizer(format!(
+                    "cannot use this tokenizer for constrained decoding: {e:#}"
+                ))
+            })?;
+        // One vocabulary slice for the planner's free-text class (see `grammar::TEXT_SLICE`) instead of
+        // llguidance's default JSON-string slices, which our grammars never use.
+        let slices = [crate::grammar::TEXT_SLICE.to_string()];
+        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &slices)
+            .map_err(|e| {
+            LlmError::Tokenizer(format!(
+                "cannot build the grammar engine for this tokenizer: {e:#}"
+            ))
+        })?;
         factory.quiet();
         Ok(Self {
             factory,
@@ -171,7 +190,8 @@ impl GrammarCompiler {
         let mut probe = Matcher::new(Ok(parser.clone()));
         if let Err(e) = probe.compute_mask() {
             return Err(LlmError::Grammar(format!(
-                "grammar cannot be satisfied: no token sequence of this vocabulary can produce it ({e})"
+                "grammar cannot be satisfied: its language is empty or no token of this vocabulary can begin it ({})",
+                first_line(&e)
             )));
         }
         let mut cache = self.lock();
@@ -214,15 +234,26 @@ impl GrammarCompiler {
     }
 }
 
+/// The first line of an llguidance error: the reason, without the parser-state dump that follows it
+/// (which goes to the debug log).
+fn first_line(e: &anyhow::Error) -> String {
+    let msg = e.to_string();
+    tracing::debug!("llguidance: {msg}");
+    msg.lines().next().unwrap_or_default().trim().to_string()
+}
+
 /// llguidance reports Lark errors as `LINE(COL): message …` or `at LINE(COL): message …`; say it in
 /// words.
 fn describe_compile_error(msg: &str) -> String {
-    let parsed = msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
-        let (line, col) = pos.split_once('(')?;
-        Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
-    });
+    let parsed =
+        msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
+            let (line, col) = pos.split_once('(')?;
+            Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
+        });
     match parsed {
-        Some((line, col, rest)) => format!("invalid Lark grammar at line {line}, column {col}: {rest}"),
+        Some((line, col, rest)) => {
+            format!("invalid Lark grammar at line {line}, column {col}: {rest}")
+        }
         None => format!("invalid Lark grammar: {msg}"),
     }
 }
@@ -253,11 +284,16 @@ impl Constraint {
             }
             v
         } else {
-            self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
+            self.matcher
+                .compute_mask()
+                .map_err(|e| self.error("no token can continue the text", e))?
         };
         if vob.is_zero() {
             // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
-            return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
+            return Err(LlmError::Decode(format!(
+                "no token can continue the text {:?}",
+                self.text_tail()
+            )));
         }
         let m = TokenMask { vob };
         self.mask = Some(m.clone());
@@ -268,7 +304,10 @@ impl Constraint {
     /// committing an EOS id is a no-op and anything else is an error.
     pub fn commit(&mut self, token: u32) -> Result<()> {
         if token as usize >= self.n_vocab {
-            return Err(LlmError::Decode(format!("token {token} is outside the vocabulary ({} ids)", self.n_vocab)));
+            return Err(LlmError::Decode(format!(
+                "token {token} is outside the vocabulary ({} ids)",
+                self.n_vocab
+            )));
         }
         if self.is_finished() {
             if self.eos.contains(&token) {
@@ -279,7 +318,10 @@ impl Constraint {
                 self.token_dbg(token)
             )));
         }
-        if !self.mask()?.is_allowed(token) {
+        if self.mask.is_none() {
+            self.mask()?;
+        }
+        if !self.mask.as_ref().is_some_and(|m| m.is_allowed(token)) {
             return Err(LlmError::Decode(format!(
                 "token {token} {} is not allowed by the grammar after {:?}",
                 self.token_dbg(token),
@@ -300,12 +342,15 @@ impl Constraint {
         }
         let ff = self.matcher.compute_ff_tokens();
         if let Some(e) = self.matcher.get_error() {
+            let e = e.lines().next().unwrap_or_default().to_string();
             return Err(LlmError::Decode(format!("computing forced tokens: {e}")));
         }
         if ff.is_empty() {
             return Ok(ff);
         }
-        self.matcher.consume_tokens(&ff).map_err(|e| self.error("cannot commit forced tokens", e))?;
+        self.matcher
+            .consume_tokens(&ff)
+            .map_err(|e| self.error("cannot commit forced tokens", e))?;
         self.mask = None;
         self.tokens.extend_from_slice(&ff);
         Ok(ff)
@@ -328,8 +373,9 @@ impl Constraint {
 
     fn error(&self, what: &str, e: anyhow::Error) -> LlmError {
         LlmError::Decode(format!(
-            "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {e}",
-            self.text_tail()
+            "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {}",
+            self.text_tail(),
+            first_line(&e)
         ))
     }
 
