@@ -10,8 +10,6 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::action::ObjRef;
-use crate::grammar::{ActionGrammar, VerbSpec};
 use crate::llm::chat::Message;
 use crate::llm::engine::{Engine, GenOptions, Generate, Generation, Prompt};
 use crate::llm::Result;
@@ -70,26 +68,13 @@ pub fn bench_prompt(world: &World) -> Prompt {
     ])
 }
 
-/// The demo scene's action grammar: every verb, every object, 1 to 8 lines.
-pub fn bench_grammar(world: &World) -> Result<String> {
-    let objects: Vec<ObjRef> = world
-        .objects()
-        .into_iter()
-        .filter(|o| o.class_name != "character")
-        .map(|o| ObjRef::new(o.class_name, o.id))
-        .collect();
-    let verbs = crate::action::Verb::ALL.iter().copied().map(VerbSpec::from);
-    ActionGrammar::new(verbs, objects)
-        .lines(1, 8)
-        .to_lark()
-        .map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))
-}
-
 /// Runs the measurements on a loaded engine.
 pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
     let world = World::demo();
     let prompt = bench_prompt(&world);
-    let lark = bench_grammar(&world)?;
+    let lark = crate::grammar::demo_kitchen_grammar()
+        .to_lark()
+        .map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))?;
     let runs = cfg.runs.max(1);
 
     // Grammar compile: a fresh text each time defeats the cache (a trailing comment changes it).
@@ -213,10 +198,8 @@ mod tests {
     }
 
     #[test]
-    fn bench_grammar_and_prompt_come_from_the_demo_scene() {
+    fn bench_prompt_lists_the_demo_scene() {
         let w = World::demo();
-        let g = bench_grammar(&w).unwrap();
-        assert!(g.contains("apple") && g.contains("fridge"), "{g}");
         match bench_prompt(&w) {
             Prompt::Chat(m) => assert!(m[1].content.contains("<apple> (12)")),
             Prompt::Text(_) => panic!("expected a chat prompt"),
