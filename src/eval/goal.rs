@@ -236,16 +236,8 @@ mod tests {
     use crate::world::{Edge, Graph, Node};
 
     fn node(id: u32, class: &str, states: &[&str]) -> Node {
-        Node {
-            id,
-            class_name: class.into(),
-            category: if class == "kitchen" { "Rooms".into() } else { "Props".into() },
-            properties: vec![],
-            states: states.iter().map(|s| s.to_string()).collect(),
-            prefab_name: None,
-            bounding_box: None,
-            obj_transform: None,
-        }
+        let category = if class == "kitchen" { "Rooms" } else { "Props" };
+        Node::new(id, class, category, &[], states)
     }
 
     /// A kitchen (1), the robot (2) in it, a fridge (3, closed, plugged in), an apple (4) inside it.

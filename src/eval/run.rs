@@ -345,16 +345,7 @@ mod tests {
     use crate::world::{Edge, Graph, Node};
 
     fn node(id: u32, class: &str, cat: &str, props: &[&str], states: &[&str]) -> Node {
-        Node {
-            id,
-            class_name: class.into(),
-            category: cat.into(),
-            properties: props.iter().map(|s| s.to_string()).collect(),
-            states: states.iter().map(|s| s.to_string()).collect(),
-            prefab_name: None,
-            bounding_box: None,
-            obj_transform: None,
-        }
+        Node::new(id, class, cat, props, states)
     }
 
     /// A kitchen with the robot, a lamp (switch, off) and a light switch nobody needs.

@@ -427,16 +427,7 @@ mod tests {
     use crate::world::Edge;
 
     fn n(id: u32, class: &str, states: &[&str]) -> Node {
-        Node {
-            id,
-            class_name: class.into(),
-            category: "Props".into(),
-            properties: vec![],
-            states: states.iter().map(|s| s.to_string()).collect(),
-            prefab_name: None,
-            bounding_box: None,
-            obj_transform: None,
-        }
+        Node::new(id, class, "Props", &[], states)
     }
     fn e(f: u32, r: &str, t: u32) -> Edge {
         Edge { from_id: f, relation_type: r.into(), to_id: t }

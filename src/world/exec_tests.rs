@@ -20,16 +20,7 @@ impl Scene {
         s.edge(2, "INSIDE", 1)
     }
     fn raw(&mut self, id: u32, class: &str, cat: &str, props: &[&str], states: &[&str]) {
-        self.0.nodes.push(Node {
-            id,
-            class_name: class.into(),
-            category: cat.into(),
-            properties: props.iter().map(|s| s.to_string()).collect(),
-            states: states.iter().map(|s| s.to_string()).collect(),
-            prefab_name: None,
-            bounding_box: None,
-            obj_transform: None,
-        });
+        self.0.nodes.push(Node::new(id, class, cat, props, states));
     }
     /// An object inside the kitchen.
     fn obj(mut self, id: u32, class: &str, props: &[&str], states: &[&str]) -> Scene {

@@ -28,6 +28,22 @@ pub struct Node {
     pub obj_transform: Option<serde_json::Value>,
 }
 
+impl Node {
+    /// A node without geometry, for scenes built in code (tests, tools).
+    pub fn new(id: u32, class_name: &str, category: &str, properties: &[&str], states: &[&str]) -> Self {
+        Node {
+            id,
+            class_name: class_name.to_string(),
+            category: category.to_string(),
+            properties: properties.iter().map(|s| s.to_string()).collect(),
+            states: states.iter().map(|s| s.to_string()).collect(),
+            prefab_name: None,
+            bounding_box: None,
+            obj_transform: None,
+        }
+    }
+}
+
 /// One directed edge: `from_id relation_type to_id`, e.g. `12 ON 5` (the apple is on the counter).
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct Edge {
