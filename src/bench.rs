@@ -42,8 +42,11 @@ pub struct LlmBenchReport {
     pub constrained_decode_tok_per_s: f64,
     /// All output tokens per second under the grammar, forced ones included.
     pub constrained_output_tok_per_s: f64,
-    /// Extra time per chosen token under the grammar, relative to unconstrained decoding.
+    /// Extra decode time per output token under the grammar, relative to unconstrained decoding
+    /// (negative: forced tokens, run in batches, make constrained decoding faster).
     pub constrained_overhead_pct: f64,
+    /// Share of constrained decode time spent computing masks.
+    pub mask_share_pct: f64,
     pub forced_token_share: f64,
     pub mask_us_p50: f64,
     pub mask_us_p99: f64,
@@ -92,6 +95,7 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     let mut coutput = Vec::new();
     let mut per_tok_plain = Vec::new();
     let mut per_tok_constrained = Vec::new();
+    let mut mask_share = Vec::new();
     let mut forced_share = Vec::new();
     let mut masks = Vec::new();
     let mut prompt_tokens = 0;
@@ -100,12 +104,14 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
         prompt_tokens = g.prompt_tokens;
         prefill.push(rate(g.prompt_tokens, g.timings.prefill_ms));
         decode.push(rate(g.tokens.len(), g.timings.decode_ms));
-        per_tok_plain.push(per_token(&g));
-        let c = engine.generate(&prompt, Some(&lark), &fresh(cfg.decode_tokens))?;
+        per_tok_plain.push(g.timings.decode_ms / g.tokens.len().max(1) as f64);
+        // The grammar decides the length here (up to 8 action lines); the cap only guards it.
+        let c = engine.generate(&prompt, Some(&lark), &fresh(cfg.decode_tokens.max(256)))?;
         let chosen = c.tokens.len() - c.forced_tokens;
         cdecode.push(rate(chosen, c.timings.decode_ms));
         coutput.push(rate(c.tokens.len(), c.timings.decode_ms));
-        per_tok_constrained.push(per_token(&c));
+        per_tok_constrained.push(c.timings.decode_ms / c.tokens.len().max(1) as f64);
+        mask_share.push(c.timings.mask_us.iter().sum::<f64>() / 1e3 / c.timings.decode_ms.max(1e-9) * 100.0);
         forced_share.push(c.forced_tokens as f64 / c.tokens.len().max(1) as f64);
         masks.extend_from_slice(&c.timings.mask_us);
     }
@@ -122,19 +128,13 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
         constrained_decode_tok_per_s: median(&mut cdecode),
         constrained_output_tok_per_s: median(&mut coutput),
         constrained_overhead_pct: if plain > 0.0 { (constrained / plain - 1.0) * 100.0 } else { 0.0 },
+        mask_share_pct: median(&mut mask_share),
         forced_token_share: median(&mut forced_share),
         mask_us_p50: percentile(&mut masks, 0.50),
         mask_us_p99: percentile(&mut masks, 0.99),
         grammar_compile_ms: median(&mut compile),
         peak_rss_mb: peak_rss_mb(),
     })
-}
-
-/// Decode milliseconds per generated token the model chose (forced tokens are run in batches and
-/// are not a per-token cost).
-fn per_token(g: &Generation) -> f64 {
-    let chosen = (g.tokens.len() - g.forced_tokens).max(1);
-    g.timings.decode_ms / chosen as f64
 }
 
 fn rate(n: usize, ms: f64) -> f64 {

@@ -92,8 +92,8 @@ fn table(r: &LlmBenchReport) -> String {
          load                 {:>9.1} ms\n\
          prefill ({:>3} tok)    {:>9.1} tok/s\n\
          decode               {:>9.1} tok/s\n\
-         decode, constrained  {:>9.1} tok/s chosen ({:.1} tok/s with forced; overhead {:+.1}%)\n\
-         mask per token       {:>9.1} µs p50, {:.1} µs p99\n\
+         decode, constrained  {:>9.1} tok/s out ({:.1} chosen/s, {:.0}% forced; {:+.1}% per token)\n\
+         mask per token       {:>9.1} µs p50, {:.1} µs p99 ({:.2}% of decode time)\n\
          grammar compile      {:>9.1} ms\n\
          peak RSS             {:>9.1} MB",
         r.model,
@@ -103,11 +103,13 @@ fn table(r: &LlmBenchReport) -> String {
         r.prompt_tokens,
         r.prefill_tok_per_s,
         r.decode_tok_per_s,
-        r.constrained_decode_tok_per_s,
         r.constrained_output_tok_per_s,
+        r.constrained_decode_tok_per_s,
+        r.forced_token_share * 100.0,
         r.constrained_overhead_pct,
         r.mask_us_p50,
         r.mask_us_p99,
+        r.mask_share_pct,
         r.grammar_compile_ms,
         r.peak_rss_mb
     )
