@@ -11,7 +11,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::llm::chat::Message;
-use crate::llm::engine::{Engine, GenOptions, Generate, Generation, Prompt};
+use crate::llm::engine::{Engine, GenOptions, Generate, Prompt};
 use crate::llm::Result;
 use crate::world::World;
 
@@ -61,10 +61,8 @@ pub fn bench_prompt(world: &World) -> Prompt {
         let props: Vec<String> = o.properties.iter().map(|p| format!("{p:?}").to_lowercase()).collect();
         objects.push_str(&format!("<{}> ({}): {}\n", o.class_name, o.id, props.join(", ")));
     }
-    let system = "You are the task planner of a household robot. Decompose the instruction into the \
-                  robot's primitive actions, one per line, in VirtualHome script form: [VERB] <object> (id). \
-                  Only use the objects listed. Walk to an object before grabbing it; open containers \
-                  before putting things in them; close them afterwards.";
+    // The prompt text lives with the other prompts, where it can be read and edited as text.
+    let system = include_str!("../prompts/bench_system.txt").trim();
     Prompt::Chat(vec![
         Message::system(system),
         Message::user(format!("Objects in the scene:\n{objects}\nInstruction: put the apple in the fridge.")),
