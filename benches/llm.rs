@@ -28,8 +28,7 @@ fn models() -> Vec<(String, PathBuf)> {
 fn load(path: &PathBuf) -> (Transformer, GgufTokenizer) {
     let g = GgufFile::open(path).unwrap();
     let tok = GgufTokenizer::from_gguf(&g).unwrap();
-    let mut r = g.reader().unwrap();
-    (Transformer::from_gguf(g.content(), &mut r, g.arch(), path).unwrap(), tok)
+    (Transformer::load(&g).unwrap(), tok)
 }
 
 fn prompt_ids(tok: &GgufTokenizer, n: usize) -> Vec<u32> {

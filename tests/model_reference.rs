@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use candle_core::quantized::gguf_file;
 use candle_core::{Device, Tensor};
-use step::llm::gguf::Arch;
+use step::llm::gguf::{Arch, GgufFile};
 use step::llm::model::{argmax, Transformer};
 
 fn model(file: &str) -> Option<PathBuf> {
@@ -21,11 +21,10 @@ fn model(file: &str) -> Option<PathBuf> {
     None
 }
 
-fn load(path: &PathBuf, arch: Arch) -> (Transformer, gguf_file::Content) {
-    let mut f = std::fs::File::open(path).unwrap();
-    let ct = gguf_file::Content::read(&mut f).unwrap();
-    let m = Transformer::from_gguf(&ct, &mut f, arch, path).unwrap();
-    (m, ct)
+fn load(path: &PathBuf, arch: Arch) -> Transformer {
+    let g = GgufFile::open(path).unwrap();
+    assert_eq!(g.arch(), arch);
+    Transformer::load(&g).unwrap()
 }
 
 fn max_rel_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -58,7 +57,7 @@ fn reference_logits(path: &PathBuf, arch: Arch) -> Vec<f32> {
 
 fn check_against_reference(file: &str, arch: Arch) {
     let Some(path) = model(file) else { return };
-    let (mut m, _) = load(&path, arch);
+    let mut m = load(&path, arch);
     let ours = m.forward(IDS).unwrap();
     let theirs = reference_logits(&path, arch);
     assert_eq!(ours.len(), theirs.len());
@@ -80,7 +79,7 @@ fn qwen2_matches_candle_quantized_qwen2() {
 #[test]
 fn cache_gives_the_same_logits_in_one_pass_step_by_step_and_after_truncation() {
     let Some(path) = model("SmolLM2-135M-Instruct.Q4_1.gguf") else { return };
-    let (mut m, _) = load(&path, Arch::Llama);
+    let mut m = load(&path, Arch::Llama);
     let whole = m.forward(IDS).unwrap();
     m.truncate(0);
     let mut stepwise = Vec::new();

@@ -103,8 +103,7 @@ impl Engine {
         let tokenizer = GgufTokenizer::from_gguf(&gguf)?;
         // A model without a chat template can still run raw text prompts.
         let template = ChatTemplate::from_gguf(&gguf).ok();
-        let mut reader = gguf.reader()?;
-        let model = Transformer::from_gguf(gguf.content(), &mut reader, gguf.arch(), path)?;
+        let model = Transformer::load(&gguf)?;
         let grammars =
             GrammarCompiler::new(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids())?;
         Ok(Self {

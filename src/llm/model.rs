@@ -7,12 +7,13 @@
 //! every token. Everything else follows the usual flow: embed → (norm → attention → residual →
 //! norm → SwiGLU → residual) × layers → norm → vocabulary projection of the last position.
 
-use std::io::{Read, Seek};
+use std::fs::File;
+use std::io::BufReader;
 
-use candle_core::quantized::{gguf_file, QMatMul, QTensor};
+use candle_core::quantized::QMatMul;
 use candle_core::{DType, Device, Module, Tensor};
 
-use super::gguf::Arch;
+use super::gguf::{Arch, GgufFile};
 use super::{LlmError, Result};
 
 /// Hyper-parameters read from the GGUF metadata (`<arch>.*` keys).
@@ -32,69 +33,57 @@ pub struct ModelConfig {
 }
 
 impl ModelConfig {
-    /// Reads the configuration; `path` only labels errors.
-    pub fn from_gguf(ct: &gguf_file::Content, arch: Arch, path: &std::path::Path) -> Result<Self> {
-        let p = arch.gguf_name();
-        let key = |k: &str| format!("{p}.{k}");
-        let get_u32 = |k: &str| -> Result<usize> {
-            let full = key(k);
-            ct.metadata
-                .get(&full)
-                .ok_or_else(|| meta_err(path, &full, "missing"))?
-                .to_u32()
-                .map(|v| v as usize)
-                .map_err(|e| meta_err(path, &full, &e.to_string()))
+    /// Reads the configuration from a validated GGUF file's `<arch>.*` metadata.
+    pub fn from_gguf(gguf: &GgufFile) -> Result<Self> {
+        let md = gguf.metadata();
+        let key = |k: &str| gguf.arch_key(k);
+        let bad = |k: &str, detail: String| LlmError::Metadata {
+            path: gguf.path().to_path_buf(),
+            key: key(k),
+            detail,
         };
-        let get_f32 = |k: &str, default: f32| -> Result<f32> {
-            let full = key(k);
-            match ct.metadata.get(&full) {
-                None => Ok(default),
-                Some(v) => v.to_f32().map_err(|e| meta_err(path, &full, &e.to_string())),
-            }
-        };
-        let n_embd = get_u32("embedding_length")?;
-        let n_head = get_u32("attention.head_count")?;
-        let n_head_kv = get_u32("attention.head_count_kv").unwrap_or(n_head);
+        let n_embd = md.get_usize(&key("embedding_length"))?;
+        let n_head = md.get_usize(&key("attention.head_count"))?;
+        let n_head_kv = md.opt_u32(&key("attention.head_count_kv"))?.map_or(n_head, |n| n as usize);
         if n_head == 0 || n_head_kv == 0 || n_embd % n_head != 0 || n_head % n_head_kv != 0 {
-            return Err(meta_err(
-                path,
-                &key("attention.head_count"),
-                &format!("inconsistent heads: {n_head} heads, {n_head_kv} kv heads, width {n_embd}"),
+            return Err(bad(
+                "attention.head_count",
+                format!("inconsistent heads: {n_head} heads, {n_head_kv} kv heads, width {n_embd}"),
             ));
         }
         let head_dim = n_embd / n_head;
-        if let Ok(rope_dim) = get_u32("rope.dimension_count") {
-            if rope_dim != head_dim {
-                return Err(meta_err(
-                    path,
-                    &key("rope.dimension_count"),
-                    &format!("partial rotary embeddings ({rope_dim} of {head_dim}) are not supported"),
+        if let Some(rope_dim) = md.opt_u32(&key("rope.dimension_count"))? {
+            if rope_dim as usize != head_dim {
+                return Err(bad(
+                    "rope.dimension_count",
+                    format!("partial rotary embeddings ({rope_dim} of {head_dim}) are not supported"),
                 ));
             }
         }
-        let embd = ct
+        let n_vocab = gguf
+            .content()
             .tensor_infos
             .get("token_embd.weight")
-            .ok_or_else(|| meta_err(path, "token_embd.weight", "tensor missing"))?;
-        let n_vocab = embd.shape.dims().first().copied().unwrap_or(0);
+            .and_then(|t| t.shape.dims().first().copied())
+            .ok_or_else(|| LlmError::Metadata {
+                path: gguf.path().to_path_buf(),
+                key: "token_embd.weight".into(),
+                detail: "tensor missing".into(),
+            })?;
         Ok(Self {
-            arch,
-            n_layer: get_u32("block_count")?,
+            arch: gguf.arch(),
+            n_layer: md.get_usize(&key("block_count"))?,
             n_embd,
             n_head,
             n_head_kv,
             head_dim,
-            n_ff: get_u32("feed_forward_length")?,
+            n_ff: md.get_usize(&key("feed_forward_length"))?,
             n_vocab,
-            context_length: get_u32("context_length").unwrap_or(4096),
-            rope_base: get_f32("rope.freq_base", 10_000.0)?,
-            rms_eps: get_f32("attention.layer_norm_rms_epsilon", 1e-5)? as f64,
+            context_length: md.opt_u32(&key("context_length"))?.map_or(4096, |n| n as usize),
+            rope_base: md.opt_f32(&key("rope.freq_base"))?.unwrap_or(10_000.0),
+            rms_eps: md.opt_f32(&key("attention.layer_norm_rms_epsilon"))?.unwrap_or(1e-5) as f64,
         })
     }
-}
-
-fn meta_err(path: &std::path::Path, key: &str, detail: &str) -> LlmError {
-    LlmError::Metadata { path: path.to_path_buf(), key: key.to_string(), detail: detail.to_string() }
 }
 
 /// One layer's keys and values, preallocated and appended in place; `len` positions are valid.
@@ -179,29 +168,18 @@ pub struct Transformer {
 const INITIAL_CACHE: usize = 512;
 
 impl Transformer {
-    /// Loads every tensor of a GGUF model; `path` only labels errors.
-    pub fn from_gguf<R: Read + Seek>(
-        ct: &gguf_file::Content,
-        reader: &mut R,
-        arch: Arch,
-        path: &std::path::Path,
-    ) -> Result<Self> {
-        let cfg = ModelConfig::from_gguf(ct, arch, path)?;
+    /// Loads every tensor of a validated GGUF model.
+    pub fn load(gguf: &GgufFile) -> Result<Self> {
+        let cfg = ModelConfig::from_gguf(gguf)?;
         let dev = Device::Cpu;
-        let tensor = |reader: &mut R, name: &str| -> Result<QTensor> {
-            if !ct.tensor_infos.contains_key(name) {
-                return Err(meta_err(path, name, "tensor missing from the file"));
-            }
-            ct.tensor(reader, name, &dev).map_err(|e| LlmError::Truncated {
-                path: path.to_path_buf(),
-                detail: format!("reading tensor {name}: {e}"),
-            })
-        };
-        let plain = |reader: &mut R, name: &str| -> Result<Tensor> {
+        let mut reader = gguf.reader()?;
+        let reader = &mut reader;
+        let tensor = |reader: &mut BufReader<File>, name: &str| gguf.tensor(reader, name, &dev);
+        let plain = |reader: &mut BufReader<File>, name: &str| -> Result<Tensor> {
             Ok(tensor(reader, name)?.dequantize(&dev)?)
         };
-        let optional = |reader: &mut R, name: &str| -> Result<Option<Tensor>> {
-            if ct.tensor_infos.contains_key(name) {
+        let optional = |reader: &mut BufReader<File>, name: &str| -> Result<Option<Tensor>> {
+            if gguf.has_tensor(name) {
                 plain(reader, name).map(Some)
             } else {
                 Ok(None)
@@ -210,7 +188,7 @@ impl Transformer {
         let embd_q = tensor(reader, "token_embd.weight")?;
         let embd = embd_q.dequantize(&dev)?;
         // Tied embeddings (SmolLM2): no output.weight, the embedding matrix projects to the vocabulary.
-        let output = if ct.tensor_infos.contains_key("output.weight") {
+        let output = if gguf.has_tensor("output.weight") {
             QMatMul::from_qtensor(tensor(reader, "output.weight")?)?
         } else {
             QMatMul::from_qtensor(embd_q)?
@@ -218,7 +196,7 @@ impl Transformer {
         let mut layers = Vec::with_capacity(cfg.n_layer);
         for i in 0..cfg.n_layer {
             let n = |s: &str| format!("blk.{i}.{s}");
-            let q = |reader: &mut R, s: &str| -> Result<QMatMul> {
+            let q = |reader: &mut BufReader<File>, s: &str| -> Result<QMatMul> {
                 Ok(QMatMul::from_qtensor(tensor(reader, &n(s))?)?)
             };
             layers.push(Layer {
