@@ -135,7 +135,8 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     })
 }
 
-fn rate(n: usize, ms: f64) -> f64 {
+/// Items per second for `n` items in `ms` milliseconds (0 for no time).
+pub fn rate(n: usize, ms: f64) -> f64 {
     if ms > 0.0 {
         n as f64 / (ms / 1e3)
     } else {

@@ -9,6 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use serde_json::json;
 
+use crate::bench::rate;
 use crate::llm::chat::Message;
 use crate::llm::engine::{Engine, GenOptions, Generate, Prompt};
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
@@ -92,16 +93,12 @@ pub fn run(args: &GenerateArgs) -> anyhow::Result<()> {
             "prefill_ms": g.timings.prefill_ms,
             "decode_ms": g.timings.decode_ms,
             "grammar_compile_ms": g.timings.grammar_compile_ms,
-            "prefill_tok_per_s": per_s(g.prompt_tokens, g.timings.prefill_ms),
-            "decode_tok_per_s": per_s(decode_tokens, g.timings.decode_ms),
+            "prefill_tok_per_s": rate(g.prompt_tokens, g.timings.prefill_ms),
+            "decode_tok_per_s": rate(decode_tokens, g.timings.decode_ms),
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
         println!("{}", g.text);
     }
     Ok(())
-}
-
-fn per_s(n: usize, ms: f64) -> f64 {
-    if ms > 0.0 { n as f64 / (ms / 1e3) } else { 0.0 }
 }

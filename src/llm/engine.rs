@@ -201,16 +201,13 @@ impl Generate for Engine {
             if let Some(c) = constraint.as_mut() {
                 // Fast-forward: tokens the grammar forces are appended and run in one pass.
                 let forced = c.forced_tokens()?;
-                if !forced.is_empty() {
-                    forced_count += forced.len();
-                    out.extend_from_slice(&forced);
-                    if c.is_finished() {
-                        break StopReason::GrammarComplete;
-                    }
-                    logits = self.forward(&forced)?;
-                }
+                forced_count += forced.len();
+                out.extend_from_slice(&forced);
                 if c.is_finished() {
                     break StopReason::GrammarComplete;
+                }
+                if !forced.is_empty() {
+                    logits = self.forward(&forced)?;
                 }
             }
             if out.len() >= opts.max_tokens {
