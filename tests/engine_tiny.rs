@@ -10,6 +10,7 @@ use step::llm::chat::Message;
 use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
 use step::llm::sample::Sampling;
 use step::llm::tiny::{write_tiny_gguf, TinySpec};
+use step::llm::LlmError;
 
 fn tiny(spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
     let path = dir.path().join(format!("tiny-{}-{}.gguf", spec.arch, spec.seed));
@@ -137,9 +138,12 @@ fn bad_inputs_are_errors_not_panics() {
     let err = e
         .generate(&chat("x"), Some("start: /[a-z]{40}/"), &GenOptions { max_tokens: 3, ..Default::default() })
         .err()
-        .unwrap()
-        .to_string();
-    assert!(err.contains("not complete after 3 tokens"), "{err}");
+        .unwrap();
+    match &err {
+        LlmError::TokenBudget { max_tokens: 3, so_far } => assert!(!so_far.is_empty(), "{err}"),
+        other => panic!("expected a token-budget error, got {other}"),
+    }
+    assert!(err.to_string().contains("not complete after 3 tokens"), "{err}");
     // Not a GGUF file.
     let txt = dir.path().join("model.gguf");
     std::fs::write(&txt, "hello").unwrap();
@@ -169,4 +173,24 @@ fn same_output_with_one_and_two_threads() {
     let one = run("1");
     assert_eq!(one, run("2"));
     assert!(parse_actions(one.trim_end()).is_ok(), "{one}");
+}
+
+#[test]
+fn a_full_context_stops_with_the_text_so_far() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut spec = TinySpec::qwen2().with_seed(2);
+    spec.context_length = 24;
+    let mut e = Engine::load(&tiny(spec, &dir)).unwrap();
+    let prompt = Prompt::Text("open the fridge".into());
+    let prompt_tokens = e.tokenizer().encode("open the fridge").unwrap().len();
+    assert!(prompt_tokens < 24, "the prompt must leave room: {prompt_tokens}");
+    let opts = GenOptions { max_tokens: 100, ..Default::default() };
+    let g = e.generate(&prompt, Some("start: /[a-z]{60}/"), &opts).unwrap();
+    assert_eq!(g.stop, StopReason::Context, "{g:?}");
+    assert_eq!(g.prompt_tokens + g.tokens.len(), 25, "every position is used, and the last token kept");
+    assert!(!g.text.is_empty() && g.text.chars().all(|c| c.is_ascii_lowercase()), "{:?}", g.text);
+    // A prompt longer than the whole context is an error that says so.
+    let long = Prompt::Text("open the fridge ".repeat(20));
+    let err = e.generate(&long, None, &opts).err().unwrap();
+    assert!(matches!(err, LlmError::PromptTooLong { context: 24, .. }), "{err}");
 }

@@ -1,6 +1,6 @@
 //! Running a plan on a task, and the metrics of a batch of runs.
 //!
-//! A plan runs step by step through the world's executor. A step whose effect already holds
+//! A plan runs step by step through [`World::step`]. A step whose effect already holds
 //! (an additional step) changes nothing and the run goes on, as in EAI; any other failure stops the
 //! run, and the plan is not executable. Goals are checked in the state the run ended in, against the
 //! actions that executed; a task succeeds only when the plan executed to the end AND every goal is
@@ -15,24 +15,8 @@ use super::goal::{Count, GoalCheck};
 use super::task::Task;
 use crate::action::{Action, ObjRef};
 use crate::program::{ParseError, ParseErrorKind, Program};
-use crate::world::{Effects, ExecFailure, FailureKind, World};
-
-/// What one step did.
-#[derive(Clone, Debug, Serialize)]
-#[serde(tag = "status", rename_all = "snake_case")]
-pub enum StepResult {
-    Ok {
-        effects: Effects,
-    },
-    /// An additional step: its effect already held; nothing changed and the run went on.
-    Skipped {
-        failure: ExecFailure,
-    },
-    /// The run stopped here.
-    Failed {
-        failure: ExecFailure,
-    },
-}
+pub use crate::world::StepResult;
+use crate::world::{ExecFailure, World};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct StepOutcome {
@@ -67,17 +51,13 @@ pub fn run_plan(task: &Task, plan: &Program) -> RunOutcome {
     let mut executed_actions: Vec<Action> = Vec::with_capacity(plan.actions.len());
     let mut failure = None;
     for (i, a) in plan.actions.iter().enumerate() {
-        let result = match world.execute(a) {
-            Ok(effects) => {
-                executed_actions.push(a.clone());
-                StepResult::Ok { effects }
-            }
-            Err(f) if f.kind == FailureKind::AdditionalStep => StepResult::Skipped { failure: f },
-            Err(f) => {
-                failure = Some(f.clone());
-                StepResult::Failed { failure: f }
-            }
-        };
+        let result = world.step(a);
+        if result.ran() {
+            executed_actions.push(a.clone());
+        }
+        if !result.goes_on() {
+            failure = result.failure().cloned();
+        }
         steps.push(StepOutcome { step: i + 1, action: a.to_string(), result });
         if failure.is_some() {
             break;

@@ -52,6 +52,9 @@ pub enum StopReason {
     GrammarComplete,
     /// `max_tokens` reached (unconstrained, or with the grammar at an accepting point).
     MaxTokens,
+    /// The model's context is full: the text so far is kept, but under a grammar it may be
+    /// incomplete. A shorter prompt or a model with a longer context leaves more room.
+    Context,
 }
 
 /// Where the time went, for the bench and the JSON output.
@@ -184,6 +187,10 @@ impl Generate for Engine {
         if prompt_ids.is_empty() {
             return Err(LlmError::Decode("the prompt is empty".into()));
         }
+        let context = self.model.config().context_length;
+        if prompt_ids.len() > context {
+            return Err(LlmError::PromptTooLong { prompt_tokens: prompt_ids.len(), context });
+        }
         let mut timings = Timings::default();
         let t = Instant::now();
         let mut constraint = grammar.map(|g| self.grammars.compile(g)).transpose()?;
@@ -207,13 +214,17 @@ impl Generate for Engine {
                     break StopReason::GrammarComplete;
                 }
                 if !forced.is_empty() {
+                    if self.cached.len() + forced.len() > context {
+                        break StopReason::Context;
+                    }
                     logits = self.forward(&forced)?;
                 }
             }
             if out.len() >= opts.max_tokens {
                 if let Some(c) = constraint.as_mut() {
                     if !c.is_accepting() {
-                        return Err(incomplete(&self.tokenizer, &out, opts.max_tokens));
+                        let so_far = self.tokenizer.decode(&out, true).unwrap_or_default();
+                        return Err(LlmError::TokenBudget { max_tokens: opts.max_tokens, so_far });
                     }
                 }
                 break StopReason::MaxTokens;
@@ -235,6 +246,10 @@ impl Generate for Engine {
             if constraint.as_ref().is_some_and(|c| c.is_finished()) {
                 break StopReason::GrammarComplete;
             }
+            // The chosen token is kept; only running it (to choose the next one) needs a position.
+            if self.cached.len() + 1 > context {
+                break StopReason::Context;
+            }
             logits = self.forward(&[tok])?;
         };
         timings.decode_ms = ms(t_decode);
@@ -249,13 +264,6 @@ impl Generate for Engine {
             timings,
         })
     }
-}
-
-fn incomplete(tok: &GgufTokenizer, out: &[u32], max: usize) -> LlmError {
-    let so_far = tok.decode(out, true).unwrap_or_default();
-    LlmError::Decode(format!(
-        "the grammar was not complete after {max} tokens (so far: {so_far:?}); raise max tokens"
-    ))
 }
 
 fn common_prefix(a: &[u32], b: &[u32]) -> usize {

@@ -25,6 +25,15 @@ pub enum LlmError {
     Grammar(String),
     #[error("decoding: {0}")]
     Decode(String),
+    /// A grammar-constrained generation used all `max_tokens` before the grammar was complete.
+    #[error("the grammar was not complete after {max_tokens} tokens (so far: {so_far:?}); raise max tokens")]
+    TokenBudget { max_tokens: usize, so_far: String },
+    /// The prompt alone does not fit the model's context.
+    #[error(
+        "the prompt is {prompt_tokens} tokens but the model's context holds {context} positions; shorten the \
+         prompt (fewer objects or examples)"
+    )]
+    PromptTooLong { prompt_tokens: usize, context: usize },
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
     #[error(transparent)]

@@ -185,18 +185,18 @@ use FailureKind::{AdditionalStep, Affordance, MissingStep};
 impl World {
     /// Whether `action` would succeed now, and if not, why. Never changes the state.
     pub fn check(&self, action: &Action) -> Result<(), ExecFailure> {
-        self.plan(action).map(|_| ())
+        self.effects_of(action).map(|_| ())
     }
 
     /// Runs one action: on success the state changes and the net effects are returned; on failure
     /// the state is unchanged.
     pub fn execute(&mut self, action: &Action) -> Result<Effects, ExecFailure> {
-        let ops = self.plan(action)?;
+        let ops = self.effects_of(action)?;
         Ok(self.apply(&ops))
     }
 
     /// Preconditions → the action's changes, or a classified, worded failure.
-    pub(crate) fn plan(&self, action: &Action) -> Result<Vec<Op>, ExecFailure> {
+    pub(crate) fn effects_of(&self, action: &Action) -> Result<Vec<Op>, ExecFailure> {
         let fail = |kind: FailureKind, message: String| ExecFailure {
             kind,
             eai_kind: kind,
