@@ -81,6 +81,26 @@ pub struct Generation {
     pub timings: Timings,
 }
 
+impl Generation {
+    /// Prompt tokens run per second (reused ones excluded: they cost nothing).
+    pub fn prefill_tok_per_s(&self) -> f64 {
+        per_second(self.prompt_tokens - self.reused_tokens.min(self.prompt_tokens), self.timings.prefill_ms)
+    }
+
+    /// Tokens the model chose per second of decoding (forced tokens excluded).
+    pub fn decode_tok_per_s(&self) -> f64 {
+        per_second(self.tokens.len().saturating_sub(self.forced_tokens), self.timings.decode_ms)
+    }
+}
+
+fn per_second(n: usize, ms: f64) -> f64 {
+    if ms > 0.0 {
+        n as f64 / (ms / 1e3)
+    } else {
+        0.0
+    }
+}
+
 /// The one call the planner makes of a model.
 pub trait Generate {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation>;
@@ -101,6 +121,13 @@ pub struct Engine {
 impl Engine {
     /// Loads a GGUF model file: validates it, reads the weights, builds tokenizer and template.
     pub fn load(path: &Path) -> Result<Self> {
+        Self::load_with_slices(path, &[])
+    }
+
+    /// As [`Engine::load`], with vocabulary slices for the grammar compiler (see
+    /// [`GrammarCompiler::with_slices`]): pass the free-text classes your grammars use (the planner
+    /// passes `grammar::TEXT_SLICE`) so masks inside free text stay cheap.
+    pub fn load_with_slices(path: &Path, slices: &[String]) -> Result<Self> {
         let t0 = Instant::now();
         let gguf = GgufFile::open(path)?;
         let tokenizer = GgufTokenizer::from_gguf(&gguf)?;
@@ -108,7 +135,7 @@ impl Engine {
         let template = ChatTemplate::from_gguf(&gguf).ok();
         let model = Transformer::load(&gguf)?;
         let grammars =
-            GrammarCompiler::new(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids())?;
+            GrammarCompiler::with_slices(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids(), slices)?;
         Ok(Self {
             path: path.to_path_buf(),
             model,
@@ -182,6 +209,21 @@ impl Engine {
 
 impl Generate for Engine {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation> {
+        self.generate_streaming(prompt, grammar, opts, None)
+    }
+}
+
+impl Engine {
+    /// [`Generate::generate`], calling `on_text` with each new piece of text as it is decoded (a
+    /// piece ends on a character boundary; the pieces concatenate to the final text).
+    pub fn generate_streaming(
+        &mut self,
+        prompt: &Prompt,
+        grammar: Option<&str>,
+        opts: &GenOptions,
+        mut on_text: Option<&mut dyn FnMut(&str)>,
+    ) -> Result<Generation> {
+        opts.sampling.validate()?;
         let text = self.render(prompt)?;
         let prompt_ids = self.tokenizer.encode(&text)?;
         if prompt_ids.is_empty() {
@@ -204,12 +246,16 @@ impl Generate for Engine {
         let mut sampler = Sampler::new(&opts.sampling);
         let mut out: Vec<u32> = Vec::new();
         let mut forced_count = 0;
+        let mut stream = Stream::default();
         let stop = loop {
             if let Some(c) = constraint.as_mut() {
                 // Fast-forward: tokens the grammar forces are appended and run in one pass.
                 let forced = c.forced_tokens()?;
                 forced_count += forced.len();
                 out.extend_from_slice(&forced);
+                if !forced.is_empty() {
+                    stream.push(&self.tokenizer, &out, &mut on_text);
+                }
                 if c.is_finished() {
                     break StopReason::GrammarComplete;
                 }
@@ -243,6 +289,7 @@ impl Generate for Engine {
                 c.commit(tok)?;
             }
             out.push(tok);
+            stream.push(&self.tokenizer, &out, &mut on_text);
             if constraint.as_ref().is_some_and(|c| c.is_finished()) {
                 break StopReason::GrammarComplete;
             }
@@ -254,6 +301,7 @@ impl Generate for Engine {
         };
         timings.decode_ms = ms(t_decode);
         let text = self.tokenizer.decode(&out, true)?;
+        stream.finish(&text, &mut on_text);
         Ok(Generation {
             text,
             tokens: out,
@@ -263,6 +311,38 @@ impl Generate for Engine {
             stop,
             timings,
         })
+    }
+}
+
+/// What has been streamed so far. The text of the tokens so far is decoded whole each time (outputs
+/// are short) and only a grown, character-complete prefix is passed on.
+#[derive(Default)]
+struct Stream {
+    sent: String,
+}
+
+impl Stream {
+    fn push(&mut self, tok: &GgufTokenizer, out: &[u32], on_text: &mut Option<&mut dyn FnMut(&str)>) {
+        let Some(f) = on_text.as_mut() else { return };
+        let Ok(text) = tok.decode(out, true) else { return };
+        // A token may end inside a multi-byte character: wait for the rest of it.
+        if text.ends_with('\u{FFFD}') || !text.starts_with(&self.sent) || text.len() == self.sent.len() {
+            return;
+        }
+        f(&text[self.sent.len()..]);
+        self.sent = text;
+    }
+
+    fn finish(&mut self, text: &str, on_text: &mut Option<&mut dyn FnMut(&str)>) {
+        let Some(f) = on_text.as_mut() else { return };
+        if let Some(rest) = text.strip_prefix(self.sent.as_str()) {
+            if !rest.is_empty() {
+                f(rest);
+            }
+        } else {
+            tracing::warn!("the streamed text differs from the final decoding; the final text is {text:?}");
+        }
+        self.sent = text.to_string();
     }
 }
 

@@ -15,6 +15,8 @@ pub enum LlmError {
     UnsupportedArch { path: PathBuf, arch: String },
     #[error("{path}: GGUF metadata '{key}' is missing or malformed: {detail}")]
     Metadata { path: PathBuf, key: String, detail: String },
+    /// A test model's spec is inconsistent (test support only).
+    #[cfg(any(test, feature = "test-support"))]
     #[error("tiny model spec: {0}")]
     TinySpec(String),
     #[error("tokenizer: {0}")]
@@ -23,6 +25,8 @@ pub enum LlmError {
     Template(String),
     #[error("grammar: {0}")]
     Grammar(String),
+    #[error("sampling: {0}")]
+    Sampling(String),
     #[error("decoding: {0}")]
     Decode(String),
     /// A grammar-constrained generation used all `max_tokens` before the grammar was complete.
@@ -34,8 +38,8 @@ pub enum LlmError {
          prompt (fewer objects or examples)"
     )]
     PromptTooLong { prompt_tokens: usize, context: usize },
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: {error}", path.display())]
+    Io { path: PathBuf, error: std::io::Error },
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
 }

@@ -13,10 +13,7 @@
 
 pub mod demo;
 pub mod exec;
-#[cfg(test)]
-mod exec_tests;
 pub mod feasible;
-mod gold_probe;
 pub mod graph;
 pub mod observe;
 pub mod state;
