@@ -10,14 +10,14 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use crate::action::{Action, ObjRef, Verb};
+use crate::action::{action_line, parse_action_line, parse_action_parts, Action, LineSyntax, ObjRef, Verb};
 
 use super::lark::lark_string;
 
 /// Characters a free-text field may use (described in words for prompts and errors).
 pub const TEXT_CHARS: &str = "ASCII letters, digits, space and , . ' _ -";
 /// The same class as a regex character class, for the Lark rendering.
-const TEXT_CLASS_REGEX: &str = r"[A-Za-z0-9 ,.'_\-]";
+pub(super) const TEXT_CLASS_REGEX: &str = r"[A-Za-z0-9 ,.'_\-]";
 /// Tokens made only of text characters, up to 10 of them: the grammar engine precomputes this slice of
 /// the vocabulary and allows it in bulk inside a free-text field with at least 10 characters left,
 /// instead of walking the whole vocabulary (about halves the mask time in text on SmolLM2's vocabulary).
@@ -28,7 +28,7 @@ pub const MAX_TEXT_CHARS: usize = 1000;
 pub const MAX_LINES: usize = 256;
 const MAX_NAME_CHARS: usize = 64;
 
-fn is_text_char(c: char) -> bool {
+pub(super) fn is_text_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, ' ' | ',' | '.' | '\'' | '_' | '-')
 }
 
@@ -154,63 +154,25 @@ impl Parsed {
 
 /// The script form of an action line with an arbitrary verb name (as [`Action`]'s `Display`).
 fn render(verb: &str, args: &[ObjRef]) -> String {
-    let mut s = format!("[{verb}]");
-    for a in args {
-        // Writing into a String cannot fail.
-        let _ = write!(s, " {a}");
-    }
-    s
+    action_line(verb, args)
 }
 
-/// Parses one line in VirtualHome script form, `[VERB] <class> (id) ...`, into the verb name and its
-/// objects. Only the canonical form is accepted (single spaces, ids without sign or leading zeros),
-/// i.e. exactly what [`Action`]'s `Display` prints.
-pub fn parse_action_line(line: &str) -> Result<(String, Vec<ObjRef>), String> {
-    let rest = line.strip_prefix('[').ok_or("an action line starts with '['")?;
-    let close = rest.find(']').ok_or("no ']' closing the verb")?;
-    let verb = &rest[..close];
-    if verb.is_empty() {
-        return Err("empty verb name".into());
-    }
-    let mut rest = &rest[close + 1..];
-    let mut args = Vec::new();
-    while !rest.is_empty() {
-        rest = rest.strip_prefix(" <").ok_or("expected ' <' before an object")?;
-        let gt = rest.find('>').ok_or("no '>' closing an object name")?;
-        let class = &rest[..gt];
-        rest = rest[gt + 1..].strip_prefix(" (").ok_or("expected ' (' before an object id")?;
-        let rp = rest.find(')').ok_or("no ')' closing an object id")?;
-        let id: u32 = rest[..rp]
-            .parse()
-            .map_err(|_| format!("object id {:?} is not a number", &rest[..rp]))?;
-        rest = &rest[rp + 1..];
-        args.push(ObjRef::new(class, id));
-    }
-    if render(verb, &args) != line {
-        return Err("not in canonical script form (spacing, id digits)".into());
-    }
-    Ok((verb.to_string(), args))
-}
-
-/// Parses a plain action list — every line an action of [`Verb::ALL`] with its arity — as the
-/// example grammars under `grammars/` produce.
+/// Parses a plain action list — every line an action of [`Verb::ALL`] with its arity, in canonical
+/// form — as the example grammars under `grammars/` produce.
 pub fn parse_actions(text: &str) -> Result<Vec<Action>, ParseError> {
     text.split('\n')
         .enumerate()
         .map(|(i, line)| {
-            let err = |reason: String| ParseError { line: i + 1, text: line.to_string(), reason };
-            let (verb, args) = parse_action_line(line).map_err(err)?;
-            let v: Verb =
-                verb.parse().map_err(|e: crate::action::UnknownVerb| err(e.to_string()))?;
-            if v.name() != verb {
-                return Err(err(format!("verb must be written {}", v.name())));
-            }
-            Action::new(v, args).map_err(|e| err(e.to_string()))
+            parse_action_line(line, LineSyntax::Canonical).map_err(|e| ParseError {
+                line: i + 1,
+                text: line.to_string(),
+                reason: e.to_string(),
+            })
         })
         .collect()
 }
 
-fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), GrammarError> {
+pub(super) fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), GrammarError> {
     let bad = |reason: String| Err(GrammarError::BadName { kind, name: name.to_string(), reason });
     if name.is_empty() {
         return bad("it is empty".into());
@@ -596,7 +558,9 @@ impl ActionGrammar {
         for (j, line) in body.iter().enumerate() {
             let i = h + j;
             if line.starts_with('[') {
-                let (verb, args) = parse_action_line(line).map_err(|e| err(i, e))?;
+                let (verb, args) = parse_action_parts(line, LineSyntax::Canonical)
+                    .map(|p| (p.verb, p.args))
+                    .map_err(|e| err(i, e.to_string()))?;
                 let v = r
                     .verbs
                     .iter()
@@ -691,7 +655,7 @@ mod tests {
             ("[GRAB]", "takes 1 object"),
             ("[STANDUP] <apple> (12)", "takes 0 object"),
             ("[FLY] <apple> (12)", "verb \"FLY\" is not allowed"),
-            ("[GRAB] <apple> (012)", "canonical"),
+            ("[GRAB] <apple> (012)", "column 15: expected an object id such as (1002), found '(012)'"),
             ("[GRAB]  <apple> (12)", "expected ' <'"),
             ("[GRAB] <apple> (12)\n", "expected an action line"),
             ("[STANDUP]\n[STANDUP]\n[STANDUP]", "3 body line(s); 1..=2"),
