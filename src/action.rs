@@ -348,15 +348,13 @@ pub fn parse_action_parts(line: &str, syntax: LineSyntax) -> Result<ActionLinePa
 pub fn parse_action_line(line: &str, syntax: LineSyntax) -> Result<Action, ActionLineError> {
     let parts = parse_action_parts(line, syntax)?;
     let verb_col = Some(column_of(line, line.find('[').map_or(0, |i| i + 1)));
-    let verb: Verb = parts
-        .verb
-        .parse()
-        .ok()
-        .filter(|v: &Verb| syntax == LineSyntax::Lenient || v.name() == parts.verb)
-        .ok_or_else(|| ActionLineError {
-            column: verb_col,
-            kind: ActionLineErrorKind::UnknownVerb(UnknownVerb(parts.verb.clone())),
-        })?;
+    let verb: Verb =
+        parts.verb.parse().ok().filter(|v: &Verb| syntax == LineSyntax::Lenient || v.name() == parts.verb).ok_or_else(
+            || ActionLineError {
+                column: verb_col,
+                kind: ActionLineErrorKind::UnknownVerb(UnknownVerb(parts.verb.clone())),
+            },
+        )?;
     Action::new(verb, parts.args)
         .map_err(|e| ActionLineError { column: None, kind: ActionLineErrorKind::WrongArity(e) })
 }
@@ -413,5 +411,49 @@ mod tests {
         let e = Action::new(Verb::PutBack, vec![soap]).unwrap_err();
         assert_eq!(e.to_string(), "PUTBACK takes 2 object(s), got 1");
         assert_eq!(Action::new(Verb::StandUp, vec![]).unwrap().to_string(), "[STANDUP]");
+    }
+    #[test]
+    fn one_parser_reads_what_display_writes() {
+        let a = Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("sink", 0)]).unwrap();
+        for syntax in [LineSyntax::Canonical, LineSyntax::Lenient] {
+            assert_eq!(parse_action_line(&a.to_string(), syntax).unwrap(), a);
+        }
+        assert_eq!(parse_action_line("[STANDUP]", LineSyntax::Canonical).unwrap().verb, Verb::StandUp);
+        // Names are verbatim in canonical form (grammars may list any name without '<', '>').
+        let p = parse_action_parts("[A\"B] <say \"hi\"> (1)", LineSyntax::Canonical).unwrap();
+        assert_eq!((p.verb.as_str(), p.args[0].class_name.as_str()), ("A\"B", "say \"hi\""));
+    }
+
+    #[test]
+    fn lenient_mode_takes_eai_ids_spaces_and_case() {
+        let a = parse_action_line("  [putback]<Soap Dish>( 1.1002 )   <sink>(7) ", LineSyntax::Lenient).unwrap();
+        assert_eq!(a.to_string(), "[PUTBACK] <soap_dish> (1002) <sink> (7)");
+        for bad in [
+            "  [WALK] <sink> (7)",
+            "[walk] <sink> (7)",
+            "[WALK] <sink> (1.7)",
+            "[WALK] <sink> (07)",
+            "[WALK]  <sink> (7)",
+            "[WALK] <sink>(7)",
+            "[WALK] <sink> (7) ",
+            "[WALK] <Sink> (7)x",
+        ] {
+            assert!(parse_action_line(bad, LineSyntax::Canonical).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn errors_say_where_and_what() {
+        let e = parse_action_line("[WALK] <sink> (seven)", LineSyntax::Lenient).unwrap_err();
+        assert_eq!(e.to_string(), "column 15: expected an object id such as (1002) or (1.1002), found '(seven)'");
+        let e = parse_action_line("[FLY] <sink> (7)", LineSyntax::Canonical).unwrap_err();
+        assert_eq!(e.column, Some(2));
+        assert!(matches!(e.kind, ActionLineErrorKind::UnknownVerb(_)));
+        let e = parse_action_line("[GRAB]", LineSyntax::Canonical).unwrap_err();
+        assert_eq!(e.to_string(), "GRAB takes 1 object(s), got 0");
+        let e = parse_action_line("walk to the sink", LineSyntax::Lenient).unwrap_err();
+        assert!(e.to_string().contains("expected an action such as `[WALK] <kitchen> (11)`"), "{e}");
+        let e = parse_action_parts("[] <sink> (7)", LineSyntax::Lenient).unwrap_err();
+        assert!(e.to_string().contains("an action name between '[' and ']'"), "{e}");
     }
 }

@@ -64,15 +64,24 @@ fn decision(kind: Kind, set: ActionSet, chars: usize) -> Result<Decision, String
     Ok(match kind {
         Kind::Decompose { subgoal, done } => {
             let g = DecomposeGrammar { actions: set, subgoal_chars: chars, allow_subgoal: subgoal, allow_done: done };
-            Decision { lark: g.to_lark().map_err(err)?, check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())) }
+            Decision {
+                lark: g.to_lark().map_err(err)?,
+                check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())),
+            }
         }
         Kind::Verdict { decompose } => {
             let g = VerdictGrammar { actions: set, reason_chars: chars, allow_decompose: decompose };
-            Decision { lark: g.to_lark().map_err(err)?, check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())) }
+            Decision {
+                lark: g.to_lark().map_err(err)?,
+                check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())),
+            }
         }
         Kind::Plan { max_lines } => {
             let g = PlanGrammar { actions: set, max_lines };
-            Decision { lark: g.to_lark().map_err(err)?, check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())) }
+            Decision {
+                lark: g.to_lark().map_err(err)?,
+                check: Box::new(move |t| g.parse(t).map(|_| ()).map_err(|e| e.to_string())),
+            }
         }
     })
 }
@@ -85,7 +94,11 @@ fn engine(qwen: bool, seed: u64, dir: &tempfile::TempDir) -> Engine {
 }
 
 fn opts(seed: u64) -> GenOptions {
-    GenOptions { max_tokens: 2000, sampling: Sampling::Sample { temperature: 1.3, top_p: 1.0, seed }, reuse_prefix: true }
+    GenOptions {
+        max_tokens: 2000,
+        sampling: Sampling::Sample { temperature: 1.3, top_p: 1.0, seed },
+        reuse_prefix: true,
+    }
 }
 
 proptest! {
@@ -149,8 +162,9 @@ fn very_large_action_sets_compile_and_decode() {
                 let out = engine.generate(&Prompt::Text("plan:".into()), Some(&lark), &opts(seed)).unwrap();
                 assert!(g.parse(&out.text).is_ok(), "set {i}: {:?}: {:?}", out.text, g.parse(&out.text));
                 let d = VerdictGrammar::new(set.clone(), 30);
-                let out =
-                    engine.generate(&Prompt::Text("verdict:".into()), Some(&d.to_lark().unwrap()), &opts(seed)).unwrap();
+                let out = engine
+                    .generate(&Prompt::Text("verdict:".into()), Some(&d.to_lark().unwrap()), &opts(seed))
+                    .unwrap();
                 assert!(d.parse(&out.text).is_ok(), "set {i}: {:?}", out.text);
             }
         }

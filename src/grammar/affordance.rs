@@ -59,9 +59,7 @@ impl SlotRequirement {
             (Verb::Cut, 0) => all(&[Prop(P::Eatable), Prop(P::Cuttable)]),
             (Verb::Eat, 0) => any(&[Prop(P::Eatable), FoodOn]),
             (Verb::Type, 0) => any(&[Prop(P::HasSwitch), Class("keyboard")]),
-            (Verb::Pull | Verb::Move, 0) => {
-                any(&[Prop(P::Movable), Class("button"), Class("chair"), Class("curtain")])
-            }
+            (Verb::Pull | Verb::Move, 0) => any(&[Prop(P::Movable), Class("button"), Class("chair"), Class("curtain")]),
             (Verb::Squeeze, 0) => any(&[
                 Prop(P::Clothes),
                 Class("cleaning_solution"),
@@ -171,7 +169,8 @@ mod tests {
             "[WALK] <fridge> (10)",
             "[OPEN] <fridge> (10)",
             "[PUTIN] <apple> (12) <fridge> (10)",
-            "[WALK] <plate> (17)",
+            "[WALK] <kitchencabinet> (16)",
+            "[OPEN] <kitchencabinet> (16)",
             "[GRAB] <plate> (17)",
             "[WALK] <sofa> (30)",
             "[SIT] <sofa> (30)",
@@ -238,9 +237,7 @@ mod tests {
         // A spread of tasks (different scenes' states and programs), chosen by position, not by id.
         let wanted: std::collections::BTreeSet<String> = meta.iter().step_by(57).map(|m| m.id.clone()).collect();
         let worlds = data
-            .scenes(Some(&wanted), |id, scene| {
-                World::from_graph(&scene.init, id).map_err(crate::eval::EvalError::from)
-            })
+            .scenes(Some(&wanted), |id, scene| World::from_graph(&scene.init, id).map_err(crate::eval::EvalError::from))
             .unwrap();
         assert_eq!(worlds.len(), wanted.len());
         let mut tried = 0;

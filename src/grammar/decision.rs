@@ -212,8 +212,9 @@ impl ActionSet {
                         GrammarError::BadName {
                             kind: "verb",
                             name: spec.name.clone(),
-                            reason: "it is not one of the embodiment's actions (step::action::Verb), written in upper case"
-                                .into(),
+                            reason:
+                                "it is not one of the embodiment's actions (step::action::Verb), written in upper case"
+                                    .into(),
                         }
                     })?;
                     if spec.arity != verb.arity() {
@@ -737,7 +738,10 @@ mod tests {
         assert!(set.contains(&act(Verb::PutIn, &[("fridge", 10), ("apple", 12)])));
         assert!(!set.contains(&act(Verb::Grab, &[("banana", 3)])));
         let lark = DecomposeGrammar::new(set, 40).to_lark().unwrap();
-        assert!(lark.contains(r#"start: "subgoal: " /[A-Za-z0-9 ,.'_\-]{1,40}/ | "action: " action | "done""#), "{lark}");
+        assert!(
+            lark.contains(r#"start: "subgoal: " /[A-Za-z0-9 ,.'_\-]{1,40}/ | "action: " action | "done""#),
+            "{lark}"
+        );
         assert!(lark.contains(r#""[PUTIN] " OBJS_0 " " OBJS_0"#), "{lark}");
         assert!(lark.contains(r#"OBJS_0: "<apple> (12)" | "<fridge> (10)" | "<kitchencounter> (11)""#), "{lark}");
         assert!(lark.contains(r#""[STANDUP]""#), "{lark}");
@@ -842,7 +846,10 @@ mod tests {
             ),
             "{lark}"
         );
-        assert_eq!(g.parse("execute: [OPEN] <fridge> (10)").unwrap(), Verdict::Execute(act(Verb::Open, &[("fridge", 10)])));
+        assert_eq!(
+            g.parse("execute: [OPEN] <fridge> (10)").unwrap(),
+            Verdict::Execute(act(Verb::Open, &[("fridge", 10)]))
+        );
         assert_eq!(g.parse("decompose").unwrap(), Verdict::Decompose);
         assert_eq!(
             g.parse("replan: environment: the fridge is locked").unwrap(),
@@ -876,17 +883,19 @@ mod tests {
         let e = PlanGrammar { actions: unknown_verb, max_lines: 2 }.to_lark().unwrap_err().to_string();
         assert!(e.contains("\"FLY\"") && e.contains("not one of the embodiment's actions"), "{e}");
         let arity = ActionSet::Slots(vec![VerbSpec::new("GRAB", 2)], kitchen());
-        assert!(matches!(
-            PlanGrammar { actions: arity, max_lines: 2 }.to_lark(),
-            Err(GrammarError::BadArity { .. })
-        ));
-        let stranger = ActionSet::Slots(vec![VerbSpec::from(Verb::Grab).restricted(vec![vec![o("door", 1)]])], kitchen());
+        assert!(matches!(PlanGrammar { actions: arity, max_lines: 2 }.to_lark(), Err(GrammarError::BadArity { .. })));
+        let stranger =
+            ActionSet::Slots(vec![VerbSpec::from(Verb::Grab).restricted(vec![vec![o("door", 1)]])], kitchen());
         assert!(matches!(
             PlanGrammar { actions: stranger, max_lines: 2 }.to_lark(),
             Err(GrammarError::UnknownObject { .. })
         ));
         let malformed = ActionSet::Exact(vec![Action { verb: Verb::Grab, args: vec![] }]);
-        assert!(PlanGrammar { actions: malformed, max_lines: 2 }.to_lark().unwrap_err().to_string().contains("Action::new"));
+        assert!(PlanGrammar { actions: malformed, max_lines: 2 }
+            .to_lark()
+            .unwrap_err()
+            .to_string()
+            .contains("Action::new"));
         let set = ActionSet::format(&kitchen());
         assert!(PlanGrammar { actions: set.clone(), max_lines: 0 }.to_lark().is_err());
         assert!(DecomposeGrammar::new(set.clone(), 0).to_lark().is_err());
