@@ -200,6 +200,7 @@ fn a_whole_eai_scene_compiles_and_decodes() {
     for strength in [Strength::Format, Strength::Feasible] {
         let set = ActionSet::build(strength, &world, &ids);
         assert!(set.len() > 300, "{strength}: {} actions", set.len());
+        eprintln!("task {} scene: {} objects, {strength}: {} actions", meta[0].id, ids.len(), set.len());
         let g = DecomposeGrammar::new(set.clone(), 40);
         let p = PlanGrammar { actions: set, max_lines: 4 };
         for seed in 0..3u64 {
@@ -207,6 +208,7 @@ fn a_whole_eai_scene_compiles_and_decodes() {
             assert!(g.parse(&out.text).is_ok(), "{strength}: {:?}", out.text);
             let out = engine.generate(&Prompt::Text("plan:".into()), Some(&p.to_lark().unwrap()), &opts(seed)).unwrap();
             assert!(p.parse(&out.text).is_ok(), "{strength}: {:?}", out.text);
+            eprintln!("  {strength} plan: {:?}", out.text);
         }
     }
 }
