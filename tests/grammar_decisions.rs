@@ -139,6 +139,71 @@ proptest! {
     }
 }
 
+/// A uniformly random walk through llguidance's masks (no model): pick any allowed token, EOS
+/// included where the grammar may end, until the grammar ends. Returns the text written.
+fn mask_walk(engine: &Engine, lark: &str, seed: u64) -> String {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let tok = engine.tokenizer();
+    let mut k = engine.grammars().compile(lark).unwrap();
+    let mut bytes = Vec::new();
+    for _ in 0..5000 {
+        for t in k.forced_tokens().unwrap() {
+            bytes.extend(tok.token_bytes(t).unwrap());
+        }
+        if k.is_finished() {
+            break;
+        }
+        let allowed: Vec<u32> = k.mask().unwrap().iter().collect();
+        assert!(!allowed.is_empty(), "empty mask after {:?}", String::from_utf8_lossy(&bytes));
+        let t = allowed[rng.random_range(0..allowed.len())];
+        if tok.is_eos(t) {
+            break;
+        }
+        k.commit(t).unwrap();
+        bytes.extend(tok.token_bytes(t).unwrap());
+    }
+    assert!(k.is_accepting() || k.is_finished(), "walk did not end: {:?}", String::from_utf8_lossy(&bytes));
+    String::from_utf8(bytes).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Many more cases than the decode loop, without forward passes: every walk through the masks
+    /// writes a sentence the independent checker accepts.
+    #[test]
+    fn random_mask_walks_write_only_accepted_decisions(
+        scene_seed in any::<u64>(),
+        steps in 0usize..15,
+        focus in 1usize..30,
+        strength in prop::sample::select(Strength::ALL.to_vec()),
+        kind in kind(),
+        chars in 1usize..30,
+        seed in any::<u64>(),
+        qwen in any::<bool>(),
+    ) {
+        let (world, ids) = random_scene(scene_seed, steps, focus);
+        let Ok(d) = decision(kind, ActionSet::build(strength, &world, &ids), chars) else { return Ok(()) };
+        let engine = walk_engine(qwen);
+        let text = mask_walk(engine, &d.lark, seed);
+        prop_assert!((d.check)(&text).is_ok(), "{:?} rejected: {:?}\n{}", text, (d.check)(&text), d.lark);
+    }
+}
+
+/// One tiny engine per architecture for the mask walks (only its tokenizer and grammar compiler
+/// are used), leaked so that proptest cases can share it.
+fn walk_engine(qwen: bool) -> &'static Engine {
+    thread_local! {
+        static ENGINES: std::cell::RefCell<[Option<&'static Engine>; 2]> = const { std::cell::RefCell::new([None, None]) };
+    }
+    ENGINES.with(|e| {
+        *e.borrow_mut()[qwen as usize].get_or_insert_with(|| {
+            let dir = Box::leak(Box::new(tempfile::tempdir().unwrap()));
+            Box::leak(Box::new(engine(qwen, 3, dir)))
+        })
+    })
+}
+
 /// A synthetic scene far larger than any EAI scene: thousands of objects in one slot and thousands of
 /// exact pairs still compile and decode (no llguidance row limit is hit), for both architectures.
 #[test]
