@@ -202,6 +202,7 @@ impl ActionSet {
                     check_obj(o)?;
                 }
                 let objs = dedup(objects.iter());
+                let known: HashSet<&ObjRef> = objs.iter().collect();
                 let mut names = BTreeSet::new();
                 for spec in verbs {
                     check_name("verb", &spec.name, &['[', ']', ' '])?;
@@ -231,7 +232,7 @@ impl ActionSet {
                                 });
                             }
                             for o in slots.iter().flatten() {
-                                if !objs.contains(o) {
+                                if !known.contains(o) {
                                     return Err(GrammarError::UnknownObject {
                                         verb: spec.name.clone(),
                                         object: o.to_string(),
