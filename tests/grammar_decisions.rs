@@ -56,8 +56,10 @@ fn kind() -> impl Strategy<Value = Kind> {
 /// (the three types parse to different outputs).
 struct Decision {
     lark: String,
-    check: Box<dyn Fn(&str) -> Result<Vec<Action>, String>>,
+    check: Box<Checker>,
 }
+
+type Checker = dyn Fn(&str) -> Result<Vec<Action>, String>;
 
 fn decision(kind: Kind, set: ActionSet, chars: usize) -> Result<Decision, String> {
     let err = |e: step::grammar::GrammarError| e.to_string();

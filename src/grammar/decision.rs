@@ -923,7 +923,7 @@ mod tests {
         assert!(!feasible.contains(&act(Verb::Grab, &[("apple", 12)])), "too far");
         for s in Strength::ALL {
             let set = ActionSet::build(s, &w, &ids);
-            assert!(set.len() > 0, "{s}");
+            assert!(!set.is_empty(), "{s}");
             for lark in [
                 DecomposeGrammar::new(set.clone(), 40).to_lark().unwrap(),
                 VerdictGrammar::new(set.clone(), 40).to_lark().unwrap(),
