@@ -45,8 +45,7 @@ mod tests {
     #[test]
     fn escaped_literals_decode_back_as_json() {
         // llguidance decodes Lark strings as JSON: the round trip through serde_json is the contract.
-        for s in ["plain", "q\"uote", "back\\slash", "tab\tnl\n", "del\u{7f}", "ünï/cödé", "\\\"\\"]
-        {
+        for s in ["plain", "q\"uote", "back\\slash", "tab\tnl\n", "del\u{7f}", "ünï/cödé", "\\\"\\"] {
             let lit = lark_string(s);
             let back: String = serde_json::from_str(&lit).unwrap();
             assert_eq!(back, s, "literal {lit}");

@@ -11,9 +11,7 @@
 //! error names it (`Step 1: [WALK] <apple> (12)` is an error at line 1, not a title).
 
 use super::{column_of, excerpt, Location, PlanFormat, PlanParseError, PlanParseErrorKind, Program};
-use crate::action::{Action, ObjRef, Verb};
-
-const EXAMPLE: &str = "an action such as `[WALK] <kitchen> (11)`";
+use crate::action::{parse_action_line, Action, ActionLineErrorKind, LineSyntax};
 
 pub(super) fn parse(text: &str) -> Result<Program, PlanParseError> {
     let mut lines = text.lines().enumerate().peekable();
@@ -65,76 +63,31 @@ pub fn parse_step_line(line: &str) -> Result<Action, PlanParseError> {
     parse_at(line, 1)
 }
 
+/// The one action-line parser in its lenient mode (spaces, verb case, EAI's `(1.1002)` ids), its
+/// error placed at `line_no`. A step with text before it (`Step 1: [WALK] …`) gets an error that
+/// says what to remove.
 fn parse_at(line: &str, line_no: usize) -> Result<Action, PlanParseError> {
-    let err = |at: usize, expected: &str, found: &str| {
-        PlanParseError::syntax(
-            PlanFormat::Lines,
-            Location::Line { line: line_no, column: Some(column_of(line, at)) },
-            expected,
-            excerpt(found),
-        )
-    };
-    let mut pos = line.len() - line.trim_start().len();
+    let pos = line.len() - line.trim_start().len();
     let rest = &line[pos..];
     if !rest.starts_with('[') {
         if let Some(at) = rest.find('[').filter(|_| looks_like_step(rest)) {
             let before = rest[..at].trim_end();
-            return Err(err(
-                pos,
-                &format!("the line to start with the action ('[' …); remove '{before}' before it"),
-                rest,
+            return Err(PlanParseError::syntax(
+                PlanFormat::Lines,
+                Location::Line { line: line_no, column: Some(column_of(line, pos)) },
+                format!("the line to start with the action ('[' …); remove '{before}' before it"),
+                excerpt(rest),
             ));
         }
-        return Err(err(pos, EXAMPLE, rest));
     }
-    let Some(close) = rest.find(']') else {
-        return Err(err(pos, "']' closing the action name", rest));
-    };
-    let verb_text = &rest[1..close];
-    let verb: Verb = verb_text.parse().map_err(|e| PlanParseError {
+    parse_action_line(line, LineSyntax::Lenient).map_err(|e| PlanParseError {
         format: PlanFormat::Lines,
-        location: Location::Line { line: line_no, column: Some(column_of(line, pos + 1)) },
-        kind: PlanParseErrorKind::UnknownVerb(e),
-    })?;
-    pos += close + 1;
-    let mut args = Vec::new();
-    loop {
-        let rest = &line[pos..];
-        let trimmed = rest.trim_start();
-        pos += rest.len() - trimmed.len();
-        if trimmed.is_empty() {
-            break;
-        }
-        if !trimmed.starts_with('<') {
-            return Err(err(pos, "'<' starting an object such as `<soap> (1002)`, or the end of the line", trimmed));
-        }
-        let Some(gt) = trimmed.find('>') else {
-            return Err(err(pos, "'>' closing the object name", trimmed));
-        };
-        let raw_name = &trimmed[1..gt];
-        let name = normalise_name(raw_name);
-        if name.is_empty() || raw_name.contains('<') {
-            return Err(err(pos, "an object name between '<' and '>'", &trimmed[..=gt]));
-        }
-        pos += gt + 1;
-        let rest = &line[pos..];
-        let after = rest.trim_start();
-        pos += rest.len() - after.len();
-        if !after.starts_with('(') {
-            return Err(err(pos, &format!("the id of <{name}> in parentheses, such as (1002) or (1.1002)"), after));
-        }
-        let Some(paren) = after.find(')') else {
-            return Err(err(pos, "')' closing the object id", after));
-        };
-        let id = parse_id(&after[1..paren])
-            .ok_or_else(|| err(pos, "an object id such as (1002) or (1.1002)", &after[..=paren]))?;
-        pos += paren + 1;
-        args.push(ObjRef::new(name, id));
-    }
-    Action::new(verb, args).map_err(|e| PlanParseError {
-        format: PlanFormat::Lines,
-        location: Location::Line { line: line_no, column: None },
-        kind: PlanParseErrorKind::WrongArity(e),
+        location: Location::Line { line: line_no, column: e.column },
+        kind: match e.kind {
+            ActionLineErrorKind::Syntax { expected, found } => PlanParseErrorKind::Syntax { expected, found },
+            ActionLineErrorKind::UnknownVerb(v) => PlanParseErrorKind::UnknownVerb(v),
+            ActionLineErrorKind::WrongArity(w) => PlanParseErrorKind::WrongArity(w),
+        },
     })
 }
 
@@ -146,22 +99,6 @@ fn looks_like_step(line: &str) -> bool {
         let name_len = rest.bytes().take_while(|b| b.is_ascii_alphabetic() || *b == b'_').count();
         name_len > 0 && rest[name_len..].starts_with(']')
     })
-}
-
-/// VirtualHome's own normalisation of a script's object name: lower case, spaces as underscores.
-fn normalise_name(raw: &str) -> String {
-    raw.split_whitespace().collect::<Vec<_>>().join("_").to_lowercase()
-}
-
-/// `1002` or `1.1002` (instance.node id) → the node id.
-fn parse_id(s: &str) -> Option<u32> {
-    let s = s.trim();
-    let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
-    match s.split_once('.') {
-        Some((inst, id)) if digits(inst) && digits(id) => id.parse().ok(),
-        None if digits(s) => s.parse().ok(),
-        _ => None,
-    }
 }
 
 pub(super) fn write(p: &Program) -> String {
@@ -185,6 +122,7 @@ pub(super) fn write(p: &Program) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::action::{ObjRef, Verb};
 
     fn soap() -> ObjRef {
         ObjRef::new("soap", 1002)
