@@ -39,8 +39,16 @@ pub fn parse_plan_format(s: &str) -> Result<PlanFormat, String> {
 pub struct InferenceArgs {
     /// CPU threads for inference (default: the machine's cores; more than the machine has is capped,
     /// with a warning). Read once, before the model loads.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..), value_name = "N")]
+    #[arg(long, value_parser = parse_threads, value_name = "N")]
     pub threads: Option<u64>,
+}
+
+fn parse_threads(s: &str) -> Result<u64, String> {
+    match s.parse::<u64>() {
+        Ok(0) => Err("at least 1 thread is needed (omit --threads to use every core)".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("'{s}' is not a whole number of threads")),
+    }
 }
 
 impl InferenceArgs {

@@ -309,6 +309,11 @@ pub fn check_grammar(lark: &str) -> Result<()> {
     Ok(())
 }
 
+/// Whether llguidance stopped on one of its parser limits (rather than on text the grammar rejects).
+fn is_limit(msg: &str) -> bool {
+    msg.contains("Current row has") || msg.contains("Too many items")
+}
+
 /// A parser-limit message in words a grammar author can act on.
 fn limit_error(msg: &str) -> LlmError {
     let first = msg.lines().next().unwrap_or_default().trim();
@@ -472,6 +477,9 @@ impl Constraint {
         }
         let ff = self.matcher.compute_ff_tokens();
         if let Some(e) = self.matcher.get_error() {
+            if is_limit(&e) {
+                return Err(limit_error(&e));
+            }
             let e = e.lines().next().unwrap_or_default().to_string();
             return Err(LlmError::Decode(format!("computing forced tokens: {e}")));
         }
@@ -500,6 +508,10 @@ impl Constraint {
     }
 
     fn error(&self, what: &str, e: anyhow::Error) -> LlmError {
+        let msg = e.to_string();
+        if is_limit(&msg) {
+            return limit_error(&msg);
+        }
         LlmError::Decode(format!(
             "{what}: the grammar cannot be satisfied from here (text so far ends {:?}): {}",
             self.text_tail(),

@@ -404,3 +404,19 @@ fn padded_logits_width_and_bad_eos_are_handled() {
     assert!(GrammarCompiler::new(tok, v, &[]).err().unwrap().to_string().contains("no end-of-sequence"));
     assert!(GrammarCompiler::new(tok, v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
 }
+
+/// Grammar problems the parser would only meet mid-generation are found without a model, in words
+/// that say what to change; `|` inside strings and regexes is not an alternative.
+#[test]
+fn check_grammar_finds_limits_before_any_model_loads() {
+    let wide: Vec<String> = (0..2100).map(|i| format!("\"w{i}\"")).collect();
+    let e = check_grammar(&format!("start: {}\n", wide.join(" | "))).unwrap_err().to_string();
+    assert!(e.contains("rule 'start' has 2100 alternatives") && e.contains("split it"), "{e}");
+    let e = check_grammar("start: \"a\" start\n").unwrap_err().to_string();
+    assert!(e.contains("never ends") || e.contains("cannot be satisfied"), "{e}");
+    let e = check_grammar("start: ((\n").unwrap_err().to_string();
+    assert!(e.contains("invalid Lark grammar"), "{e}");
+    let piped: Vec<String> = (0..2100).map(|i| format!("a|{i}")).collect();
+    check_grammar(&format!("start: \"{}\" | /x|y/\n", piped.join(""))).unwrap();
+    check_grammar("start: line+\nline: (\"[WALK] <fridge> (5)\" | \"[OPEN] <fridge> (5)\") \"\\n\"\n").unwrap();
+}
