@@ -317,7 +317,7 @@ impl Run<'_> {
                     self.set_status(child, Status::Replanned, format!("{cause}: {reason}"));
                     replans += 1;
                     self.stats.replans += 1;
-                    rejected = Some(format!("{child_text}: {reason}"));
+                    rejected = Some(rejection(&child_text, &reason));
                 }
                 Verdict::Decompose if depth + 1 >= budgets.max_depth => {
                     // Unreachable under the grammar (decompose is not offered this deep); kept so a
@@ -358,7 +358,7 @@ impl Run<'_> {
                         Err(reason) => {
                             replans += 1;
                             self.stats.replans += 1;
-                            rejected = Some(format!("{child_text}: {reason}"));
+                            rejected = Some(rejection(&child_text, &reason));
                         }
                     }
                 }
@@ -412,6 +412,15 @@ impl Run<'_> {
             }
         }
         Ok(r)
+    }
+}
+
+/// "step: why", without repeating the step when the reason already names it (executor messages do).
+fn rejection(step: &str, reason: &str) -> String {
+    if reason.contains(step) {
+        reason.to_string()
+    } else {
+        format!("{step}: {reason}")
     }
 }
 

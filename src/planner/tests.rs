@@ -24,7 +24,10 @@ impl Scripted {
 fn prompt_text(p: &Prompt) -> String {
     match p {
         Prompt::Text(t) => t.clone(),
-        Prompt::Chat(ms) => ms.iter().map(|m| format!("<{}>{}", m.role, m.content)).collect::<Vec<_>>().join("\n"),
+        // The system message is the same for every call (and its examples would match the checks).
+        Prompt::Chat(ms) => {
+            ms.iter().filter(|m| m.role != "system").map(|m| format!("<{}>{}", m.role, m.content)).collect::<Vec<_>>().join("\n")
+        }
     }
 }
 
@@ -156,7 +159,7 @@ fn a_failed_execution_makes_the_parent_replan_with_the_executors_message() {
     assert_eq!(out.tree.node(1).status, Status::Failed);
     assert_eq!(out.stats.failed_executions, 1);
     assert_eq!(out.stats.actions, 2);
-    assert!(m.prompts[2].contains("Rejected: [GRAB] <apple> (12): cannot GRAB"), "{}", m.prompts[2]);
+    assert!(m.prompts[2].contains("Rejected: cannot [GRAB] <apple> (12): "), "{}", m.prompts[2]);
     assert!(m.prompts[2].contains("WALK to <apple> (12) first"), "the message names the fix: {}", m.prompts[2]);
     assert_eq!(plan_lines(&out), [WALK_APPLE]);
 }
