@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use step::grammar::demo_kitchen_grammar;
+use step::scene_grammar::demo_kitchen_grammar;
 use step::llm::engine::Engine;
 use step::llm::gguf::GgufFile;
 use step::llm::model::Transformer;

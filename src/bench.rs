@@ -73,7 +73,7 @@ pub fn bench_prompt(world: &World) -> Prompt {
 pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
     let world = World::demo();
     let prompt = bench_prompt(&world);
-    let lark = crate::grammar::demo_kitchen_grammar()
+    let lark = crate::scene_grammar::demo_kitchen_grammar()
         .to_lark()
         .map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))?;
     let runs = cfg.runs.max(1);

@@ -11,6 +11,8 @@
 //! - [`program`]: plans as text: VirtualHome program lines, JSON, and EAI's LLM-output format.
 //! - [`eval`]: task sets (EAI's VirtualHome set, a user's own file), goal checks, metrics.
 //! - [`grammar`]: Lark grammars built from the embodiment and the scene.
+//! - [`scene_grammar`]: grammars over a particular scene (the demo kitchen's), where `world` and
+//!   `grammar` meet.
 //! - [`planner`]: the STEP planner: subgoal tree, decomposition and termination, closed loop.
 //! - [`llm`]: the local runtime: GGUF loading, tokenizer and chat template from the GGUF, forward pass,
 //!   sampling, grammar-constrained decoding, prompt-prefix reuse.
@@ -25,4 +27,5 @@ pub mod grammar;
 pub mod llm;
 pub mod planner;
 pub mod program;
+pub mod scene_grammar;
 pub mod world;

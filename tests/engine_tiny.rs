@@ -10,6 +10,7 @@ use step::llm::chat::Message;
 use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
 use step::llm::sample::Sampling;
 use step::llm::tiny::{write_tiny_gguf, TinySpec};
+use step::llm::LlmError;
 
 fn tiny(spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
     let path = dir.path().join(format!("tiny-{}-{}.gguf", spec.arch, spec.seed));
@@ -18,11 +19,7 @@ fn tiny(spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
 }
 
 fn kitchen_grammar() -> String {
-    let objects = vec![
-        ObjRef::new("apple", 12),
-        ObjRef::new("fridge", 5),
-        ObjRef::new("kitchen_counter", 7),
-    ];
+    let objects = vec![ObjRef::new("apple", 12), ObjRef::new("fridge", 5), ObjRef::new("kitchen_counter", 7)];
     let verbs = [Verb::Walk, Verb::Grab, Verb::Open, Verb::PutIn, Verb::Close, Verb::StandUp];
     ActionGrammar::new(verbs.into_iter().map(VerbSpec::from), objects).lines(1, 4).to_lark().unwrap()
 }
@@ -40,8 +37,7 @@ fn constrained_generation_parses_on_both_architectures() {
         let opts = GenOptions { max_tokens: 200, ..Default::default() };
         let g = e.generate(&chat("put the apple in the fridge"), Some(&lark), &opts).unwrap();
         assert_ne!(g.stop, StopReason::MaxTokens, "{:?}", g.text);
-        let actions = parse_actions(&g.text)
-            .unwrap_or_else(|err| panic!("output does not parse: {err:?}\n{}", g.text));
+        let actions = parse_actions(&g.text).unwrap_or_else(|err| panic!("output does not parse: {err:?}\n{}", g.text));
         assert!((1..=4).contains(&actions.len()), "{}", g.text);
         for a in &actions {
             assert_eq!(a.args.len(), a.verb.arity());
@@ -61,8 +57,7 @@ fn sampled_constrained_generation_parses_for_many_seeds() {
             reuse_prefix: true,
         };
         let g = e.generate(&chat("tidy the kitchen"), Some(&lark), &opts).unwrap();
-        parse_actions(&g.text)
-            .unwrap_or_else(|err| panic!("seed {seed}: output does not parse: {err:?}\n{}", g.text));
+        parse_actions(&g.text).unwrap_or_else(|err| panic!("seed {seed}: output does not parse: {err:?}\n{}", g.text));
     }
 }
 
@@ -71,18 +66,14 @@ fn prefix_reuse_gives_identical_outputs_and_skips_the_shared_prefix() {
     let dir = tempfile::tempdir().unwrap();
     let path = tiny(TinySpec::qwen2().with_seed(7), &dir);
     let lark = kitchen_grammar();
-    let prompts: Vec<Prompt> =
-        ["put the apple in the fridge", "put the apple on the counter", "open the fridge"]
-            .iter()
-            .map(|t| chat(t))
-            .collect();
+    let prompts: Vec<Prompt> = ["put the apple in the fridge", "put the apple on the counter", "open the fridge"]
+        .iter()
+        .map(|t| chat(t))
+        .collect();
     let run = |reuse: bool| {
         let mut e = Engine::load(&path).unwrap();
         let opts = GenOptions { max_tokens: 120, sampling: Sampling::Greedy, reuse_prefix: reuse };
-        prompts
-            .iter()
-            .map(|p| e.generate(p, Some(&lark), &opts).unwrap())
-            .collect::<Vec<_>>()
+        prompts.iter().map(|p| e.generate(p, Some(&lark), &opts).unwrap()).collect::<Vec<_>>()
     };
     let with = run(true);
     let without = run(false);
@@ -117,9 +108,7 @@ fn forced_tokens_are_fast_forwarded() {
     // A grammar with a single sentence: every token is forced, none is chosen by the model.
     let dir = tempfile::tempdir().unwrap();
     let mut e = Engine::load(&tiny(TinySpec::llama(), &dir)).unwrap();
-    let g = e
-        .generate(&chat("go"), Some("start: \"[WALK] <fridge> (5)\""), &GenOptions::default())
-        .unwrap();
+    let g = e.generate(&chat("go"), Some("start: \"[WALK] <fridge> (5)\""), &GenOptions::default()).unwrap();
     assert_eq!(g.text, "[WALK] <fridge> (5)");
     assert_eq!(g.forced_tokens, g.tokens.len());
     assert_eq!(g.stop, StopReason::GrammarComplete);
@@ -137,9 +126,12 @@ fn bad_inputs_are_errors_not_panics() {
     let err = e
         .generate(&chat("x"), Some("start: /[a-z]{40}/"), &GenOptions { max_tokens: 3, ..Default::default() })
         .err()
-        .unwrap()
-        .to_string();
-    assert!(err.contains("not complete after 3 tokens"), "{err}");
+        .unwrap();
+    match &err {
+        LlmError::TokenBudget { max_tokens: 3, so_far } => assert!(!so_far.is_empty(), "{err}"),
+        other => panic!("expected a token-budget error, got {other}"),
+    }
+    assert!(err.to_string().contains("not complete after 3 tokens"), "{err}");
     // Not a GGUF file.
     let txt = dir.path().join("model.gguf");
     std::fs::write(&txt, "hello").unwrap();
@@ -156,7 +148,7 @@ fn same_output_with_one_and_two_threads() {
     std::fs::write(&grammar, kitchen_grammar()).unwrap();
     let run = |threads: &str| {
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_step"))
-            .args(["--threads", threads, "generate", "--max-tokens", "64", "--prompt", "open the fridge"])
+            .args(["generate", "--threads", threads, "--max-tokens", "64", "--prompt", "open the fridge"])
             .arg("--model")
             .arg(&path)
             .arg("--grammar")
@@ -169,4 +161,24 @@ fn same_output_with_one_and_two_threads() {
     let one = run("1");
     assert_eq!(one, run("2"));
     assert!(parse_actions(one.trim_end()).is_ok(), "{one}");
+}
+
+#[test]
+fn a_full_context_stops_with_the_text_so_far() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut spec = TinySpec::qwen2().with_seed(2);
+    spec.context_length = 24;
+    let mut e = Engine::load(&tiny(spec, &dir)).unwrap();
+    let prompt = Prompt::Text("open the fridge".into());
+    let prompt_tokens = e.tokenizer().encode("open the fridge").unwrap().len();
+    assert!(prompt_tokens < 24, "the prompt must leave room: {prompt_tokens}");
+    let opts = GenOptions { max_tokens: 100, ..Default::default() };
+    let g = e.generate(&prompt, Some("start: /[a-z]{60}/"), &opts).unwrap();
+    assert_eq!(g.stop, StopReason::Context, "{g:?}");
+    assert_eq!(g.prompt_tokens + g.tokens.len(), 25, "every position is used, and the last token kept");
+    assert!(!g.text.is_empty() && g.text.chars().all(|c| c.is_ascii_lowercase()), "{:?}", g.text);
+    // A prompt longer than the whole context is an error that says so.
+    let long = Prompt::Text("open the fridge ".repeat(20));
+    let err = e.generate(&long, None, &opts).err().unwrap();
+    assert!(matches!(err, LlmError::PromptTooLong { context: 24, .. }), "{err}");
 }

@@ -4,7 +4,8 @@
 
 use std::path::PathBuf;
 
-use step::grammar::{demo_kitchen_grammar, parse_actions};
+use step::grammar::parse_actions;
+use step::scene_grammar::demo_kitchen_grammar;
 use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
 
 fn smollm2() -> Option<PathBuf> {

@@ -131,7 +131,7 @@ fn sim_run_prints_each_step_and_the_goal_check() {
     std::fs::write(&plan, "[GRAB] <apple> (12)\n[WALK] <fridge> (10)\n").unwrap();
     let (ok, out, _) =
         step_cmd(&["sim", "run", "--tasks-file", &ex, "--task", "apple_in_fridge", "--plan", &p, "--format", "lines"]);
-    assert!(ok);
+    assert!(!ok, "a plan that ran but failed exits non-zero (3)");
     assert!(out.contains("FAILED missing_step") && out.contains("1 later step(s) not run"), "{out}");
     assert!(out.contains("unmet: no edge 12 INSIDE 10") && out.contains("success: no"), "{out}");
 

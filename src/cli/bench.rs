@@ -31,15 +31,17 @@ pub struct LlmArgs {
     /// Model: an installed name, a .gguf path, or owner/repo:file.gguf from the local HF cache.
     #[arg(long, short, default_value = DEFAULT_MODEL)]
     pub model: String,
-    /// Repetitions; each figure is the median.
-    #[arg(long, default_value_t = 3)]
-    pub runs: usize,
+    /// Repetitions (at least 1); each figure is the median.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    pub runs: u64,
     /// Tokens to decode per run.
     #[arg(long, default_value_t = 64)]
     pub decode_tokens: usize,
     /// Measure while other processes keep every core busy (a shared robot CPU).
     #[arg(long)]
     pub busy_neighbour: bool,
+    #[command(flatten)]
+    pub inference: super::args::InferenceArgs,
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
@@ -53,9 +55,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
 }
 
 fn llm(a: &LlmArgs) -> anyhow::Result<()> {
+    a.inference.apply();
     let path = resolve_model(&a.model)?;
-    let mut engine = Engine::load(&path)?;
-    let cfg = LlmBenchConfig { runs: a.runs, decode_tokens: a.decode_tokens };
+    let mut engine = Engine::load_with_slices(&path, &[crate::grammar::TEXT_SLICE.to_string()])?;
+    let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens };
     let neighbours = if a.busy_neighbour { spawn_neighbours()? } else { Vec::new() };
     let report = run_llm_bench(&mut engine, &cfg);
     for mut c in neighbours {

@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::sim::TaskArgs;
+use super::args::TaskArgs;
 use crate::eval::{score, PlanInput, Summary, TaskReport};
 
 #[derive(Args, Debug)]

@@ -1,12 +1,15 @@
 //! The `step` command line: one clap subcommand per job, each a thin call into the library.
 //!
 //! Errors reach the user as one `error: …` line with its causes, never a panic; the exit code is 1 for
-//! a failed command and 2 for a usage error (clap's own).
+//! a failed command and 2 for a usage error (clap's own); `sim run` also says whether the task
+//! succeeded (3: it did not). A reader that closes our output early (`step … | head -1`) ends the
+//! process quietly, as it does any Unix tool.
 
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod args;
 pub mod bench;
 pub mod eval;
 pub mod generate;
@@ -14,15 +17,17 @@ pub mod plan;
 pub mod sim;
 
 #[derive(Parser, Debug)]
-#[command(name = "step", version, about = "Offline subgoal-tree task planner for robots (STEP)")]
+#[command(
+    name = "step",
+    version,
+    about = "Offline subgoal-tree task planner for robots (STEP)",
+    after_help = "Exit codes: 0 success; 1 error; 2 usage error; 3 (sim run) the plan ran but the task did not \
+                  succeed. Output closed early (e.g. piped into head): the process ends quietly."
+)]
 pub struct Cli {
     /// Log filter (tracing's EnvFilter syntax), e.g. `info` or `step=debug`; also RUST_LOG.
-    #[arg(long, global = true)]
+    #[arg(long, global = true, value_parser = parse_log_filter)]
     pub log: Option<String>,
-    /// CPU threads for inference (default: the machine's cores). Read once, before the first
-    /// forward pass.
-    #[arg(long, global = true)]
-    pub threads: Option<usize>,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -45,13 +50,11 @@ pub enum Command {
 
 /// Entry point of the binary: parse, set up logging, run, report.
 pub fn main() -> ExitCode {
+    quiet_on_closed_pipe();
     let cli = Cli::parse();
     init_tracing(cli.log.as_deref());
-    if let Some(n) = cli.threads {
-        set_threads(n);
-    }
     match run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -59,31 +62,50 @@ pub fn main() -> ExitCode {
     }
 }
 
-fn run(command: Command) -> anyhow::Result<()> {
+/// `sim run`'s code for a plan that ran but whose task did not succeed.
+pub const EXIT_TASK_FAILED: u8 = 3;
+
+fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
-        Command::Plan(a) => plan::run(&a),
-        Command::Replay(a) => plan::replay(&a),
-        Command::Generate(a) => generate::run(&a),
-        Command::Bench(a) => bench::run(&a),
+        Command::Plan(a) => plan::run(&a).map(|()| ExitCode::SUCCESS),
+        Command::Replay(a) => plan::replay(&a).map(|()| ExitCode::SUCCESS),
+        Command::Generate(a) => generate::run(&a).map(|()| ExitCode::SUCCESS),
+        Command::Bench(a) => bench::run(&a).map(|()| ExitCode::SUCCESS),
         Command::Sim(a) => sim::run(a),
-        Command::Eval(a) => eval::run(a),
+        Command::Eval(a) => eval::run(a).map(|()| ExitCode::SUCCESS),
     }
+}
+
+/// `--log`: rejected unless tracing can read it (a typo would otherwise silently log nothing).
+fn parse_log_filter(s: &str) -> Result<String, String> {
+    tracing_subscriber::EnvFilter::builder()
+        .parse(s)
+        .map(|_| s.to_string())
+        .map_err(|e| format!("{e} (examples: warn, info, step=debug, step::llm=trace)"))
 }
 
 fn init_tracing(filter: Option<&str>) {
     use tracing_subscriber::EnvFilter;
     let filter = match filter {
         Some(f) => EnvFilter::new(f),
-        None => EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")),
+        None => match std::env::var("RUST_LOG") {
+            Ok(v) if !v.is_empty() => EnvFilter::builder().parse(&v).unwrap_or_else(|e| {
+                eprintln!("warning: ignoring RUST_LOG={v:?}: {e}");
+                EnvFilter::new("warn")
+            }),
+            _ => EnvFilter::new("warn"),
+        },
     };
     // Logs go to stderr so that stdout stays clean for JSON and plans.
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
 }
 
-/// candle sizes its worker pool from these variables the first time it is used, so they are set
-/// before any model is loaded.
-fn set_threads(n: usize) {
-    let n = n.max(1).to_string();
-    std::env::set_var("CANDLE_NUM_THREADS", &n);
-    std::env::set_var("RAYON_NUM_THREADS", &n);
+/// Rust ignores SIGPIPE, so a write to a closed pipe is an error and `println!` panics on it. Restoring
+/// the default action ends the process quietly instead, as the reader intended.
+fn quiet_on_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in main, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
 }

@@ -11,6 +11,7 @@ use anyhow::{anyhow, bail, Context};
 use clap::Args;
 use serde_json::{json, Value};
 
+use super::args::InferenceArgs;
 use crate::eval::task::Task;
 use crate::eval::TaskSource;
 use crate::llm::engine::Engine;
@@ -94,6 +95,8 @@ pub struct PlanArgs {
     /// Do not print the tree as it grows.
     #[arg(long, short)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub inference: InferenceArgs,
 }
 
 #[derive(Args, Debug)]
@@ -103,6 +106,8 @@ pub struct ReplayArgs {
     /// Use this model instead of the one the trace names.
     #[arg(long)]
     pub model: Option<String>,
+    #[command(flatten)]
+    pub inference: InferenceArgs,
 }
 
 /// Where the world came from, recorded in the trace so replay can rebuild it.
@@ -251,14 +256,20 @@ fn request(instruction: Option<&str>, context: Option<String>, world: &World, ta
     Ok(req)
 }
 
+/// The engine, with the grammar compiler's free-text slice (subgoals and reasons are free text).
+fn load_engine(path: &Path) -> anyhow::Result<Engine> {
+    Ok(Engine::load_with_slices(path, &[crate::grammar::TEXT_SLICE.to_string()])?)
+}
+
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
+    args.inference.apply();
     let cfg = config(args)?;
     let scene = scene_meta(args);
     let (world, task) = load_scene(&scene)?;
     let req = request(args.instruction.as_deref(), args.context.clone(), &world, task.as_ref(), args.oracle_stop)?;
     let mut env = make_env(&args.env, world, req.focus.clone())?;
     let path = resolve_model(&args.model)?;
-    let mut engine = Engine::load(&path)?;
+    let mut engine = load_engine(&path)?;
     let mut trace = match &args.trace {
         Some(p) => TraceWriter::create(p).with_context(|| format!("creating trace file {}", p.display()))?,
         None => TraceWriter::sink(),
@@ -351,6 +362,7 @@ fn percentile(xs: &[f64], q: f64) -> f64 {
 }
 
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
+    args.inference.apply();
     let recorded = read_trace(&args.trace).map_err(|e| anyhow!(e))?;
     let h = &recorded.header;
     let cfg = PlannerConfig::from_json(&h["settings"]).map_err(|e| anyhow!("{}: {e}", args.trace.display()))?;
@@ -370,7 +382,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     if args.model.is_none() && fp != meta["model"] {
         eprintln!("warning: the model file changed since the trace was written ({} vs {})", fp, meta["model"]);
     }
-    let mut engine = Engine::load(&model)?;
+    let mut engine = load_engine(&model)?;
     let out = plan(&mut engine, env.as_mut(), &req, &cfg, &mut TraceWriter::sink());
     let diffs = compare(&recorded, &out);
     if diffs.is_empty() {

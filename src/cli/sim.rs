@@ -1,13 +1,17 @@
 //! `step sim run`: runs one plan on one task in the symbolic world and prints each step's outcome and
-//! the goal check.
+//! the goal check (or, with `--json`, the same as one JSON object). The exit code says whether the
+//! task succeeded, so scripts can branch on it.
 
-use std::io::{IsTerminal, Read};
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{bail, Context};
-use clap::{Args, Subcommand, ValueEnum};
+use clap::{Args, Subcommand};
+use serde_json::json;
 
-use crate::eval::{run_plan, StepResult, TaskSource};
+use super::args::{parse_plan_format, read_input, TaskArgs};
+use super::EXIT_TASK_FAILED;
+use crate::eval::{run_plan, StepResult};
 use crate::program::{PlanFormat, Program};
 
 #[derive(Args, Debug)]
@@ -19,46 +23,11 @@ pub struct SimArgs {
 #[derive(Subcommand, Debug)]
 pub enum SimCommand {
     /// Run a plan on a task: each step's outcome (ok, or the failure kind and why), then the goals.
+    #[command(after_help = "\
+Exit codes: 0 the task succeeded (every step ran and every goal is met); 3 the plan was read and run but the \
+task did not succeed (a step failed or a goal is unmet); 1 error (unreadable plan, unknown task, missing \
+data); 2 usage error.")]
     Run(RunArgs),
-}
-
-/// The plan formats, for `--format`.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum FormatArg {
-    /// VirtualHome program lines: `[WALK] <kitchen> (11)`, optionally under a title and description.
-    Lines,
-    /// A JSON list of {"verb", "args": [{"class_name", "id"}]}.
-    Json,
-    /// EAI's LLM-output object: {"WALK": ["kitchen", 11], ...}.
-    Eai,
-}
-
-impl From<FormatArg> for PlanFormat {
-    fn from(f: FormatArg) -> PlanFormat {
-        match f {
-            FormatArg::Lines => PlanFormat::Lines,
-            FormatArg::Json => PlanFormat::Json,
-            FormatArg::Eai => PlanFormat::Eai,
-        }
-    }
-}
-
-/// Where tasks come from (shared by the commands that take tasks).
-#[derive(Args, Debug, Clone, Default)]
-pub struct TaskArgs {
-    /// A task file of your own (JSON list of tasks); without it, EAI's VirtualHome tasks are used.
-    #[arg(long, value_name = "FILE")]
-    pub tasks_file: Option<PathBuf>,
-    /// The VirtualHome benchmark data directory (holding eai/ and resources/); default: $STEP_VH_DATA,
-    /// else ../shared/bench/virtualhome beside the repo.
-    #[arg(long, value_name = "DIR")]
-    pub data: Option<PathBuf>,
-}
-
-impl TaskArgs {
-    pub fn source(&self) -> TaskSource {
-        TaskSource { tasks_file: self.tasks_file.clone(), data: self.data.clone() }
-    }
 }
 
 #[derive(Args, Debug)]
@@ -69,43 +38,50 @@ pub struct RunArgs {
     /// The plan file (`-` for standard input).
     #[arg(long, value_name = "FILE")]
     pub plan: PathBuf,
-    /// The plan's format; guessed from the text when absent.
-    #[arg(long, value_enum)]
-    pub format: Option<FormatArg>,
+    /// The plan's format: lines, json or eai; guessed from the text when absent.
+    #[arg(long, value_parser = parse_plan_format, value_name = "lines|json|eai")]
+    pub format: Option<PlanFormat>,
     #[command(flatten)]
     pub tasks: TaskArgs,
+    /// Print one JSON object: the task, every step's outcome, the goals and the verdict.
+    #[arg(long)]
+    pub json: bool,
 }
 
-pub fn run(args: SimArgs) -> anyhow::Result<()> {
+pub fn run(args: SimArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         SimCommand::Run(a) => run_one(a),
     }
 }
 
-fn read_plan(path: &PathBuf) -> anyhow::Result<String> {
-    if path.as_os_str() == "-" {
-        let mut s = String::new();
-        if std::io::stdin().is_terminal() {
-            bail!("--plan - reads the plan from standard input, but nothing is piped in");
-        }
-        std::io::stdin().read_to_string(&mut s).context("reading the plan from standard input")?;
-        return Ok(s);
-    }
-    std::fs::read_to_string(path).with_context(|| format!("cannot read plan file {}", path.display()))
-}
-
-fn run_one(a: RunArgs) -> anyhow::Result<()> {
-    let text = read_plan(&a.plan)?;
-    let format = a.format.map(PlanFormat::from).unwrap_or_else(|| PlanFormat::detect(&text));
+fn run_one(a: RunArgs) -> anyhow::Result<ExitCode> {
+    let text = read_input(&a.plan, "plan file")?;
+    let format = a.format.unwrap_or_else(|| PlanFormat::detect(&text));
     let program =
         Program::parse(&text, format).with_context(|| format!("cannot read the plan in {}", a.plan.display()))?;
     let tasks = a.tasks.source().load(Some(std::slice::from_ref(&a.task)))?;
     let Some(task) = tasks.first() else { bail!("task '{}' was not loaded", a.task) };
+    let out = run_plan(task, &program);
+    let code = if out.success { ExitCode::SUCCESS } else { ExitCode::from(EXIT_TASK_FAILED) };
+    if a.json {
+        let g = &out.goals;
+        let report = json!({
+            "task": task.id,
+            "title": task.title,
+            "steps": out.steps,
+            "not_run": program.actions.len() - out.steps.len(),
+            "executed": out.executed,
+            "goals": {"state": g.state(), "relation": g.relation(), "action": g.action(), "unmet": g.unmet()},
+            "outside_relevant": out.outside_relevant.iter().map(|o| o.to_string()).collect::<Vec<_>>(),
+            "success": out.success,
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(code);
+    }
     println!("task {}: {}", task.id, task.title);
     if !task.description.is_empty() {
         println!("  {}", task.description);
     }
-    let out = run_plan(task, &program);
     let width = out.steps.iter().map(|s| s.action.len()).max().unwrap_or(0);
     for s in &out.steps {
         let status = match &s.result {
@@ -148,5 +124,5 @@ fn run_one(a: RunArgs) -> anyhow::Result<()> {
         );
     }
     println!("success: {}", if out.success { "yes" } else { "no" });
-    Ok(())
+    Ok(code)
 }

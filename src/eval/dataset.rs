@@ -76,7 +76,9 @@ pub struct EaiData {
 }
 
 fn read_text(path: &Path) -> Result<String, EvalError> {
-    std::fs::read_to_string(path).map_err(|source| EvalError::Io { path: path.to_path_buf(), source })
+    std::fs::read_to_string(path)
+        .map(|t| crate::program::strip_bom(&t).to_string())
+        .map_err(|error| EvalError::Io { path: path.to_path_buf(), error })
 }
 
 fn json_error(path: &Path, e: serde_json::Error) -> EvalError {
@@ -156,7 +158,7 @@ impl EaiData {
     {
         let path = self.graphs_path();
         let archive_err = |message: String| EvalError::Archive { path: path.clone(), message };
-        let file = std::fs::File::open(&path).map_err(|source| EvalError::Io { path: path.clone(), source })?;
+        let file = std::fs::File::open(&path).map_err(|error| EvalError::Io { path: path.clone(), error })?;
         let (tx, rx) = std::sync::mpsc::sync_channel::<(String, Vec<u8>)>(4);
         let remaining = wanted.map(|w| w.len());
         let results = std::thread::scope(|s| {

@@ -4,11 +4,15 @@
 //! - [`dataset`]: EAI's files, read in place (the scene archive is streamed, never unpacked to disk).
 //! - [`task`]: [`Task`] (scene, goal, gold plan, relevant objects); users' task files.
 //! - [`goal`]: node, edge and action goals and their check.
-//! - [`run`]: running a plan on a task; per-task reports and the batch [`Summary`].
+//! - [`run`]: running a plan on a task, step by step through `World::step`.
+//! - [`score`]: one task's report (parse errors, run failures, goals).
+//! - [`report`]: the batch [`Summary`], its rates and text table.
 
 pub mod dataset;
 pub mod goal;
+pub mod report;
 pub mod run;
+pub mod score;
 pub mod task;
 
 use std::path::PathBuf;
@@ -31,8 +35,8 @@ pub enum EvalError {
         looked.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
     )]
     DataMissing { looked: Vec<PathBuf>, explicit: bool },
-    #[error("cannot read {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("cannot read {}: {error}", path.display())]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{path}:{line}:{column}: {message}")]
     Json { path: PathBuf, line: usize, column: usize, message: String },
     #[error("{path}: {message}")]

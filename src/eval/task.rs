@@ -18,7 +18,7 @@ use serde::Deserialize;
 use super::dataset::{task_id_key, EaiData};
 use super::goal::{Goal, RawGoal};
 use super::EvalError;
-use crate::program::{parse_step_line, Location, ParseError, Program};
+use crate::program::{parse_step_line, Location, PlanParseError, Program};
 use crate::world::{read_scene, Graph, Node, World};
 
 /// Where a task came from.
@@ -38,7 +38,7 @@ pub struct Task {
     pub description: String,
     pub goal: Goal,
     /// The gold plan: absent for user tasks without one; an error when EAI's file does not parse.
-    pub gold: Option<Result<Program, ParseError>>,
+    pub gold: Option<Result<Program, PlanParseError>>,
     /// The initial state.
     pub world: World,
     /// Relevant object ids, ascending (see the module documentation).
@@ -185,7 +185,7 @@ struct LightEdge<'a> {
 /// One EAI scene file → the initial world and the relevant objects.
 fn eai_scene(id: &str, text: &str, origin: &str) -> Result<(World, Vec<u32>), EvalError> {
     let name = format!("EAI task {id}");
-    match serde_json::from_str::<LightScene>(text) {
+    match serde_json::from_str::<LightScene>(crate::program::strip_bom(text)) {
         Ok(l) => {
             let world = World::from_graph(&l.init_graph, &name)?;
             let fin: Vec<(u32, &str, u32)> =
@@ -226,12 +226,16 @@ pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<T
             path: data.root.join("eai/resources/task_state_LTL_formula_accurate.json"),
             message: format!("task {id}: {m}"),
         })?;
+        // A task without a program file has no gold plan; a file that exists but cannot be read
+        // (permissions, not UTF-8 text) is an error naming it, never a silent "no plan".
         let (description, gold) = match data.program_text(&id) {
             Ok(text) => {
+                let text = crate::program::strip_bom(&text);
                 let description = text.lines().nth(1).unwrap_or("").trim().to_string();
-                (description, Some(Program::parse(&text, crate::program::PlanFormat::Lines)))
+                (description, Some(Program::parse(text, crate::program::PlanFormat::Lines)))
             }
-            Err(_) => (String::new(), None),
+            Err(EvalError::Io { error, .. }) if error.kind() == std::io::ErrorKind::NotFound => (String::new(), None),
+            Err(e) => return Err(e),
         };
         tasks.push(Task {
             id,
@@ -270,8 +274,8 @@ fn looks_like_eai_id(s: &str) -> bool {
 /// Loads and checks a user's task file. `data` is the `--data` directory, used only when a task's
 /// scene is an EAI task id.
 pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalError> {
-    let text = std::fs::read_to_string(path).map_err(|source| EvalError::Io { path: path.to_path_buf(), source })?;
-    let raw: Vec<RawTask> = serde_json::from_str(&text).map_err(|e| EvalError::Json {
+    let text = std::fs::read_to_string(path).map_err(|error| EvalError::Io { path: path.to_path_buf(), error })?;
+    let raw: Vec<RawTask> = serde_json::from_str(crate::program::strip_bom(&text)).map_err(|e| EvalError::Json {
         path: path.to_path_buf(),
         line: e.line(),
         column: e.column(),
@@ -371,7 +375,7 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
 }
 
 /// Gold steps one per list entry; an error's line is the step number.
-fn parse_gold(lines: &[String]) -> Result<Program, ParseError> {
+fn parse_gold(lines: &[String]) -> Result<Program, PlanParseError> {
     let mut actions = Vec::with_capacity(lines.len());
     for (i, l) in lines.iter().enumerate() {
         let a = parse_step_line(l).map_err(|mut e| {

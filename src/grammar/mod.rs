@@ -12,7 +12,7 @@ mod actions;
 mod lark;
 
 pub use actions::{
-    demo_kitchen_grammar, parse_action_line, parse_actions, ActionGrammar, Field, FieldKind,
+    parse_action_line, parse_actions, ActionGrammar, Field, FieldKind,
     GrammarError, ParseError, Parsed, PlanLine, VerbSpec, MAX_LINES, MAX_TEXT_CHARS, TEXT_CHARS,
     TEXT_SLICE,
 };

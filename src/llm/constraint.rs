@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use llguidance::api::TopLevelGrammar;
-use llguidance::toktrie::{InferenceCapabilities, SimpleVob, TokEnv};
+use llguidance::toktrie::{ApproximateTokEnv, InferenceCapabilities, SimpleVob, TokEnv};
 use llguidance::{Matcher, ParserFactory, TokenParser};
 use toktrie_hf_tokenizers::ByteTokenizer;
 
@@ -115,6 +115,19 @@ impl GrammarCompiler {
     /// `n_vocab` is the model's logits width (it may exceed the tokenizer's vocabulary: the extra ids
     /// are never allowed); `eos` the ids that end a generation, allowed only where the grammar can end.
     pub fn new(tokenizer: &tokenizers::Tokenizer, n_vocab: usize, eos: &[u32]) -> Result<Self> {
+        Self::with_slices(tokenizer, n_vocab, eos, &[])
+    }
+
+    /// As [`GrammarCompiler::new`], with vocabulary slices: regular expressions (e.g. the free-text
+    /// class the caller's grammars use) for which llguidance precomputes token sets, so masks inside
+    /// such text are cheap. Slices change speed, never which tokens are allowed. The runtime knows no
+    /// grammar of its own; the caller passes the classes its grammars use.
+    pub fn with_slices(
+        tokenizer: &tokenizers::Tokenizer,
+        n_vocab: usize,
+        eos: &[u32],
+        slices: &[String],
+    ) -> Result<Self> {
         let vocab = tokenizer.get_vocab_size(true);
         if vocab == 0 {
             return Err(LlmError::Tokenizer("the tokenizer has an empty vocabulary".into()));
@@ -135,32 +148,19 @@ impl GrammarCompiler {
             )));
         }
         // toktrie_hf_tokenizers asserts on a few malformed vocabularies; turn that into an error.
-        let tok_env: TokEnv =
-            std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
-                let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
-                bt.set_eos_tokens(eos);
-                bt.into_tok_env(Some(n_vocab))
-            }))
-            .map_err(|_| {
-                LlmError::Tokenizer(
-                    "the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)"
-                        .into(),
-                )
-            })?
-            .map_err(|e| {
-                LlmError::Tokenizer(format!(
-                    "cannot use this tokenizer for constrained decoding: {e:#}"
-                ))
-            })?;
-        // One vocabulary slice for the planner's free-text class (see `grammar::TEXT_SLICE`) instead of
-        // llguidance's default JSON-string slices, which our grammars never use.
-        let slices = [crate::grammar::TEXT_SLICE.to_string()];
-        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), &slices)
-            .map_err(|e| {
-            LlmError::Tokenizer(format!(
-                "cannot build the grammar engine for this tokenizer: {e:#}"
-            ))
-        })?;
+        let tok_env: TokEnv = std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
+            let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
+            bt.set_eos_tokens(eos);
+            bt.into_tok_env(Some(n_vocab))
+        }))
+        .map_err(|_| {
+            LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into())
+        })?
+        .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
+        // Only the caller's slices, never llguidance's default JSON-string ones, which these grammars
+        // do not use.
+        let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), slices)
+            .map_err(|e| LlmError::Tokenizer(format!("cannot build the grammar engine for this tokenizer: {e:#}")))?;
         factory.quiet();
         Ok(Self {
             factory,
@@ -245,17 +245,155 @@ fn first_line(e: &anyhow::Error) -> String {
 /// llguidance reports Lark errors as `LINE(COL): message …` or `at LINE(COL): message …`; say it in
 /// words.
 fn describe_compile_error(msg: &str) -> String {
-    let parsed =
-        msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
-            let (line, col) = pos.split_once('(')?;
-            Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
-        });
+    let parsed = msg.strip_prefix("at ").unwrap_or(msg).split_once("): ").and_then(|(pos, rest)| {
+        let (line, col) = pos.split_once('(')?;
+        Some((line.trim().parse::<usize>().ok()?, col.parse::<usize>().ok()?, rest))
+    });
     match parsed {
         Some((line, col, rest)) => {
             format!("invalid Lark grammar at line {line}, column {col}: {rest}")
         }
         None => format!("invalid Lark grammar: {msg}"),
     }
+}
+
+/// The most alternatives llguidance's parser holds at one point (its `max_items_in_row`).
+pub const MAX_ALTERNATIVES: usize = 2000;
+
+/// Checks a grammar without a model, so a bad grammar is reported before a model loads (seconds)
+/// and in words that say what to change: Lark syntax, a rule (or group) with more alternatives than
+/// the parser holds at one point, a grammar whose text never ends (a rule that always recurses into
+/// itself), and an empty language. It compiles against a one-byte-per-token vocabulary, so a grammar
+/// that passes can still be one a particular model's vocabulary cannot write (reported at compile).
+pub fn check_grammar(lark: &str) -> Result<()> {
+    if let Some((rule, n)) = widest_rule(lark) {
+        if n > MAX_ALTERNATIVES {
+            return Err(LlmError::Grammar(format!(
+                "rule '{rule}' has {n} alternatives, but the grammar engine holds at most {MAX_ALTERNATIVES} at one \
+                 point; split it into nested rules (e.g. one rule per verb or per object class) or offer fewer objects"
+            )));
+        }
+    }
+    let env = ApproximateTokEnv::single_byte_env();
+    let mut factory = ParserFactory::new(&env, InferenceCapabilities::default(), &[])
+        .map_err(|e| LlmError::Grammar(format!("cannot build the grammar checker: {e:#}")))?;
+    factory.quiet();
+    let parser = factory
+        .create_parser(TopLevelGrammar::from_lark(lark.to_string()))
+        .map_err(|e| LlmError::Grammar(describe_compile_error(&e.to_string())))?;
+    let mut m = Matcher::new(Ok(parser));
+    let eos = env.tok_trie().eos_token();
+    // Walk a few hundred bytes along the first allowed byte: limits the parser hits on the way
+    // (too many alternatives, endless forced text) surface here rather than mid-generation.
+    for _ in 0..256 {
+        if m.is_stopped() {
+            break;
+        }
+        let ff = m.compute_ff_tokens();
+        if let Some(e) = m.get_error() {
+            return Err(limit_error(&e));
+        }
+        if !ff.is_empty() {
+            m.consume_tokens(&ff).map_err(|e| limit_error(&e.to_string()))?;
+            continue;
+        }
+        let mask = m.compute_mask().map_err(|e| limit_error(&e.to_string()))?;
+        if mask.is_allowed(eos) {
+            break;
+        }
+        let Some(t) = (0..256u32).find(|&t| mask.is_allowed(t)) else {
+            return Err(LlmError::Grammar("grammar cannot be satisfied: no text can continue it".into()));
+        };
+        m.consume_token(t).map_err(|e| limit_error(&e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// A parser-limit message in words a grammar author can act on.
+fn limit_error(msg: &str) -> LlmError {
+    let first = msg.lines().next().unwrap_or_default().trim();
+    if first.contains("Current row has") {
+        LlmError::Grammar(format!(
+            "the grammar offers more than {MAX_ALTERNATIVES} alternatives at one point; split large choices into \
+             nested rules (e.g. one rule per verb or per object class) or offer fewer objects ({first})"
+        ))
+    } else if first.contains("Too many items") {
+        LlmError::Grammar(format!(
+            "the grammar never ends: from some point every continuation is forced and endless (a rule that always \
+             recurses into itself); give each recursive rule a way to finish ({first})"
+        ))
+    } else {
+        LlmError::Grammar(format!("grammar cannot be satisfied: {first}"))
+    }
+}
+
+/// The rule (or parenthesised group) with the most `|` alternatives, by a plain scan of the Lark
+/// text that skips strings, regular expressions and comments.
+fn widest_rule(lark: &str) -> Option<(String, usize)> {
+    let mut best: Option<(String, usize)> = None;
+    let mut rule = String::new();
+    // One counter per open group; index 0 is the rule's top level.
+    let mut groups: Vec<usize> = vec![1];
+    let close = |rule: &str, n: usize, best: &mut Option<(String, usize)>| {
+        if best.as_ref().is_none_or(|b| n > b.1) {
+            *best = Some((rule.to_string(), n));
+        }
+    };
+    for line in lark.lines() {
+        let t = line.trim_start();
+        if t.is_empty() || t.starts_with("//") || t.starts_with('%') {
+            continue;
+        }
+        if !t.starts_with('|') {
+            let head: String = t.chars().take_while(|c| c.is_alphanumeric() || *c == '_' || *c == '?').collect();
+            if !head.is_empty() && t[head.len()..].trim_start().starts_with(':') {
+                for n in groups.drain(..) {
+                    close(&rule, n, &mut best);
+                }
+                groups.push(1);
+                rule = head;
+            }
+        }
+        let mut chars = t.chars().peekable();
+        while let Some(c) = chars.next() {
+            match c {
+                '"' | '\'' => {
+                    while let Some(d) = chars.next() {
+                        if d == '\\' {
+                            chars.next();
+                        } else if d == c {
+                            break;
+                        }
+                    }
+                }
+                '/' if chars.peek() == Some(&'/') => break,
+                '/' => {
+                    while let Some(d) = chars.next() {
+                        if d == '\\' {
+                            chars.next();
+                        } else if d == '/' {
+                            break;
+                        }
+                    }
+                }
+                '(' | '[' => groups.push(1),
+                ')' | ']' if groups.len() > 1 => {
+                    let n = groups.pop().unwrap_or(1);
+                    close(&rule, n, &mut best);
+                }
+                '|' => {
+                    if let Some(g) = groups.last_mut() {
+                        *g += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    for n in groups {
+        close(&rule, n, &mut best);
+    }
+    best
 }
 
 /// One generation's grammar state: which tokens may come next, and which are forced.
@@ -284,16 +422,11 @@ impl Constraint {
             }
             v
         } else {
-            self.matcher
-                .compute_mask()
-                .map_err(|e| self.error("no token can continue the text", e))?
+            self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
         };
         if vob.is_zero() {
             // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
-            return Err(LlmError::Decode(format!(
-                "no token can continue the text {:?}",
-                self.text_tail()
-            )));
+            return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
         }
         let m = TokenMask { vob };
         self.mask = Some(m.clone());
@@ -304,10 +437,7 @@ impl Constraint {
     /// committing an EOS id is a no-op and anything else is an error.
     pub fn commit(&mut self, token: u32) -> Result<()> {
         if token as usize >= self.n_vocab {
-            return Err(LlmError::Decode(format!(
-                "token {token} is outside the vocabulary ({} ids)",
-                self.n_vocab
-            )));
+            return Err(LlmError::Decode(format!("token {token} is outside the vocabulary ({} ids)", self.n_vocab)));
         }
         if self.is_finished() {
             if self.eos.contains(&token) {
@@ -348,9 +478,7 @@ impl Constraint {
         if ff.is_empty() {
             return Ok(ff);
         }
-        self.matcher
-            .consume_tokens(&ff)
-            .map_err(|e| self.error("cannot commit forced tokens", e))?;
+        self.matcher.consume_tokens(&ff).map_err(|e| self.error("cannot commit forced tokens", e))?;
         self.mask = None;
         self.tokens.extend_from_slice(&ff);
         Ok(ff)
@@ -392,4 +520,4 @@ impl Constraint {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -52,6 +52,9 @@ pub enum StopReason {
     GrammarComplete,
     /// `max_tokens` reached (unconstrained, or with the grammar at an accepting point).
     MaxTokens,
+    /// The model's context is full: the text so far is kept, but under a grammar it may be
+    /// incomplete. A shorter prompt or a model with a longer context leaves more room.
+    Context,
 }
 
 /// Where the time went, for the bench and the JSON output.
@@ -78,6 +81,26 @@ pub struct Generation {
     pub timings: Timings,
 }
 
+impl Generation {
+    /// Prompt tokens run per second (reused ones excluded: they cost nothing).
+    pub fn prefill_tok_per_s(&self) -> f64 {
+        per_second(self.prompt_tokens - self.reused_tokens.min(self.prompt_tokens), self.timings.prefill_ms)
+    }
+
+    /// Tokens the model chose per second of decoding (forced tokens excluded).
+    pub fn decode_tok_per_s(&self) -> f64 {
+        per_second(self.tokens.len().saturating_sub(self.forced_tokens), self.timings.decode_ms)
+    }
+}
+
+fn per_second(n: usize, ms: f64) -> f64 {
+    if ms > 0.0 {
+        n as f64 / (ms / 1e3)
+    } else {
+        0.0
+    }
+}
+
 /// The one call the planner makes of a model.
 pub trait Generate {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation>;
@@ -98,6 +121,13 @@ pub struct Engine {
 impl Engine {
     /// Loads a GGUF model file: validates it, reads the weights, builds tokenizer and template.
     pub fn load(path: &Path) -> Result<Self> {
+        Self::load_with_slices(path, &[])
+    }
+
+    /// As [`Engine::load`], with vocabulary slices for the grammar compiler (see
+    /// [`GrammarCompiler::with_slices`]): pass the free-text classes your grammars use (the planner
+    /// passes `grammar::TEXT_SLICE`) so masks inside free text stay cheap.
+    pub fn load_with_slices(path: &Path, slices: &[String]) -> Result<Self> {
         let t0 = Instant::now();
         let gguf = GgufFile::open(path)?;
         let tokenizer = GgufTokenizer::from_gguf(&gguf)?;
@@ -105,7 +135,7 @@ impl Engine {
         let template = ChatTemplate::from_gguf(&gguf).ok();
         let model = Transformer::load(&gguf)?;
         let grammars =
-            GrammarCompiler::new(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids())?;
+            GrammarCompiler::with_slices(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids(), slices)?;
         Ok(Self {
             path: path.to_path_buf(),
             model,
@@ -179,10 +209,29 @@ impl Engine {
 
 impl Generate for Engine {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation> {
+        self.generate_streaming(prompt, grammar, opts, None)
+    }
+}
+
+impl Engine {
+    /// [`Generate::generate`], calling `on_text` with each new piece of text as it is decoded (a
+    /// piece ends on a character boundary; the pieces concatenate to the final text).
+    pub fn generate_streaming(
+        &mut self,
+        prompt: &Prompt,
+        grammar: Option<&str>,
+        opts: &GenOptions,
+        mut on_text: Option<&mut dyn FnMut(&str)>,
+    ) -> Result<Generation> {
+        opts.sampling.validate()?;
         let text = self.render(prompt)?;
         let prompt_ids = self.tokenizer.encode(&text)?;
         if prompt_ids.is_empty() {
             return Err(LlmError::Decode("the prompt is empty".into()));
+        }
+        let context = self.model.config().context_length;
+        if prompt_ids.len() > context {
+            return Err(LlmError::PromptTooLong { prompt_tokens: prompt_ids.len(), context });
         }
         let mut timings = Timings::default();
         let t = Instant::now();
@@ -197,23 +246,31 @@ impl Generate for Engine {
         let mut sampler = Sampler::new(&opts.sampling);
         let mut out: Vec<u32> = Vec::new();
         let mut forced_count = 0;
+        let mut stream = Stream::default();
         let stop = loop {
             if let Some(c) = constraint.as_mut() {
                 // Fast-forward: tokens the grammar forces are appended and run in one pass.
                 let forced = c.forced_tokens()?;
                 forced_count += forced.len();
                 out.extend_from_slice(&forced);
+                if !forced.is_empty() {
+                    stream.push(&self.tokenizer, &out, &mut on_text);
+                }
                 if c.is_finished() {
                     break StopReason::GrammarComplete;
                 }
                 if !forced.is_empty() {
+                    if self.cached.len() + forced.len() > context {
+                        break StopReason::Context;
+                    }
                     logits = self.forward(&forced)?;
                 }
             }
             if out.len() >= opts.max_tokens {
                 if let Some(c) = constraint.as_mut() {
                     if !c.is_accepting() {
-                        return Err(incomplete(&self.tokenizer, &out, opts.max_tokens));
+                        let so_far = self.tokenizer.decode(&out, true).unwrap_or_default();
+                        return Err(LlmError::TokenBudget { max_tokens: opts.max_tokens, so_far });
                     }
                 }
                 break StopReason::MaxTokens;
@@ -232,13 +289,19 @@ impl Generate for Engine {
                 c.commit(tok)?;
             }
             out.push(tok);
+            stream.push(&self.tokenizer, &out, &mut on_text);
             if constraint.as_ref().is_some_and(|c| c.is_finished()) {
                 break StopReason::GrammarComplete;
+            }
+            // The chosen token is kept; only running it (to choose the next one) needs a position.
+            if self.cached.len() + 1 > context {
+                break StopReason::Context;
             }
             logits = self.forward(&[tok])?;
         };
         timings.decode_ms = ms(t_decode);
         let text = self.tokenizer.decode(&out, true)?;
+        stream.finish(&text, &mut on_text);
         Ok(Generation {
             text,
             tokens: out,
@@ -251,11 +314,36 @@ impl Generate for Engine {
     }
 }
 
-fn incomplete(tok: &GgufTokenizer, out: &[u32], max: usize) -> LlmError {
-    let so_far = tok.decode(out, true).unwrap_or_default();
-    LlmError::Decode(format!(
-        "the grammar was not complete after {max} tokens (so far: {so_far:?}); raise max tokens"
-    ))
+/// What has been streamed so far. The text of the tokens so far is decoded whole each time (outputs
+/// are short) and only a grown, character-complete prefix is passed on.
+#[derive(Default)]
+struct Stream {
+    sent: String,
+}
+
+impl Stream {
+    fn push(&mut self, tok: &GgufTokenizer, out: &[u32], on_text: &mut Option<&mut dyn FnMut(&str)>) {
+        let Some(f) = on_text.as_mut() else { return };
+        let Ok(text) = tok.decode(out, true) else { return };
+        // A token may end inside a multi-byte character: wait for the rest of it.
+        if text.ends_with('\u{FFFD}') || !text.starts_with(&self.sent) || text.len() == self.sent.len() {
+            return;
+        }
+        f(&text[self.sent.len()..]);
+        self.sent = text;
+    }
+
+    fn finish(&mut self, text: &str, on_text: &mut Option<&mut dyn FnMut(&str)>) {
+        let Some(f) = on_text.as_mut() else { return };
+        if let Some(rest) = text.strip_prefix(self.sent.as_str()) {
+            if !rest.is_empty() {
+                f(rest);
+            }
+        } else {
+            tracing::warn!("the streamed text differs from the final decoding; the final text is {text:?}");
+        }
+        self.sent = text.to_string();
+    }
 }
 
 fn common_prefix(a: &[u32], b: &[u32]) -> usize {

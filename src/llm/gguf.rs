@@ -67,13 +67,13 @@ impl GgufFile {
     /// Opens and validates the GGUF file at `path`.
     pub fn open(path: &Path) -> Result<Self> {
         let file =
-            File::open(path).map_err(|source| LlmError::Io { path: path.to_path_buf(), source })?;
+            File::open(path).map_err(|error| LlmError::Io { path: path.to_path_buf(), error })?;
         Self::from_reader(&mut BufReader::new(file), path)
     }
 
     /// Validates GGUF data from any reader positioned at its start; `path` names it in errors.
     pub fn from_reader<R: Read + Seek>(reader: &mut R, path: &Path) -> Result<Self> {
-        let io = |source| LlmError::Io { path: path.to_path_buf(), source };
+        let io = |error| LlmError::Io { path: path.to_path_buf(), error };
         let file_len = reader.seek(SeekFrom::End(0)).map_err(io)?;
         reader.seek(SeekFrom::Start(0)).map_err(io)?;
         check_magic(reader, file_len, path)?;
@@ -132,7 +132,7 @@ impl GgufFile {
     /// A fresh buffered reader on the file, for reading tensor data.
     pub fn reader(&self) -> Result<BufReader<File>> {
         let file = File::open(&self.path)
-            .map_err(|source| LlmError::Io { path: self.path.clone(), source })?;
+            .map_err(|error| LlmError::Io { path: self.path.clone(), error })?;
         Ok(BufReader::new(file))
     }
 
@@ -317,7 +317,7 @@ fn check_magic<R: Read>(reader: &mut R, file_len: u64, path: &Path) -> Result<()
     let mut head = [0u8; 8];
     reader
         .read_exact(&mut head)
-        .map_err(|source| LlmError::Io { path: path.to_path_buf(), source })?;
+        .map_err(|error| LlmError::Io { path: path.to_path_buf(), error })?;
     if &head[..4] != GGUF_MAGIC {
         let shown: String =
             head[..4].iter().map(|&b| if b.is_ascii_graphic() { b as char } else { '.' }).collect();

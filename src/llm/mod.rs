@@ -5,7 +5,8 @@
 //! these models), [`model`] is the forward pass with an owned KV cache, [`constraint`] turns a Lark
 //! grammar into a token mask per step (llguidance), [`sample`] chooses a token, and [`engine`] runs the
 //! loop with prompt-prefix reuse behind the one trait the planner sees, [`engine::Generate`].
-//! [`tiny`] writes random-weight models of each architecture for tests and benches.
+//! `tiny` writes random-weight models of each architecture for tests and benches; it is compiled only
+//! with the `test-support` feature (this crate's tests and benches enable it), not part of the API.
 
 pub mod chat;
 pub mod constraint;
@@ -15,6 +16,8 @@ pub mod gguf;
 pub mod locate;
 pub mod model;
 pub mod sample;
+/// Test support (the `test-support` feature, on for this crate's own tests and benches only).
+#[cfg(any(test, feature = "test-support"))]
 pub mod tiny;
 pub mod tokenizer;
 

@@ -7,7 +7,7 @@ use candle_core::{Device, Tensor};
 use candle_transformers::generation::{LogitsProcessor, Sampling as CandleSampling};
 use serde::{Deserialize, Serialize};
 
-use super::Result;
+use super::{LlmError, Result};
 
 /// How the next token is chosen.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -17,6 +17,24 @@ pub enum Sampling {
     /// Draw from the distribution at `temperature`, restricted to the `top_p` nucleus, with a
     /// seeded generator: the same seed gives the same output.
     Sample { temperature: f64, top_p: f64, seed: u64 },
+}
+
+impl Sampling {
+    /// Checks the parameters: temperature finite and >= 0 (0 means greedy), top-p in (0, 1]
+    /// (1 keeps the whole distribution).
+    pub fn validate(&self) -> Result<()> {
+        if let Sampling::Sample { temperature, top_p, .. } = *self {
+            if !temperature.is_finite() || temperature < 0.0 {
+                return Err(LlmError::Sampling(format!(
+                    "temperature must be a finite number >= 0 (0 is greedy), got {temperature}"
+                )));
+            }
+            if !(top_p > 0.0 && top_p <= 1.0) {
+                return Err(LlmError::Sampling(format!("top-p must be in (0, 1] (1 keeps every token), got {top_p}")));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for Sampling {
@@ -34,8 +52,9 @@ impl Sampler {
     pub fn new(sampling: &Sampling) -> Self {
         let (seed, s) = match *sampling {
             Sampling::Greedy => (0, CandleSampling::ArgMax),
+            // Parameters are checked by `Sampling::validate` (the engine calls it); 0 is greedy.
             Sampling::Sample { temperature, top_p, seed } if temperature > 0.0 => {
-                if top_p > 0.0 && top_p < 1.0 {
+                if top_p < 1.0 {
                     (seed, CandleSampling::TopP { p: top_p, temperature })
                 } else {
                     (seed, CandleSampling::All { temperature })

@@ -397,7 +397,7 @@ pub fn tiny_gguf_bytes(spec: &TinySpec) -> Result<Vec<u8>> {
 
 /// Writes the tiny model of `spec` to `path` (created or replaced).
 pub fn write_tiny_gguf(spec: &TinySpec, path: &Path) -> Result<()> {
-    let io_err = |source| LlmError::Io { path: path.to_path_buf(), source };
+    let io_err = |error| LlmError::Io { path: path.to_path_buf(), error };
     let bytes = tiny_gguf_bytes(spec)?;
     let mut f = std::fs::File::create(path).map_err(io_err)?;
     f.write_all(&bytes).map_err(io_err)?;

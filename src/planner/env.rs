@@ -9,7 +9,7 @@
 use serde::Serialize;
 
 use crate::action::Action;
-use crate::world::{FailureKind, World};
+use crate::world::{StepResult, World};
 
 /// What executing one action did.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
@@ -68,13 +68,15 @@ pub trait Env {
     fn world(&self) -> Option<&World>;
 }
 
-/// The world's step-by-step run: one action, its outcome, the additional-step rule.
-// TODO(step): World::step — replace by helper B's World::step once the `house` branch is merged.
+/// One action in the world ([`World::step`]: the executor and the additional-step rule, the same code
+/// the scorer runs), as an [`Outcome`].
 pub(crate) fn world_step(world: &mut World, action: &Action) -> Outcome {
-    match world.execute(action) {
-        Ok(_) => Outcome::Ok { observation: None },
-        Err(f) if f.kind == FailureKind::AdditionalStep => Outcome::Skipped { reason: f.message },
-        Err(f) => Outcome::Failed { reason: f.message, kind: Some(f.kind.name().to_string()) },
+    match world.step(action) {
+        StepResult::Ok { .. } => Outcome::Ok { observation: None },
+        StepResult::Skipped { failure } => Outcome::Skipped { reason: failure.message },
+        StepResult::Failed { failure } => {
+            Outcome::Failed { reason: failure.message, kind: Some(failure.kind.name().to_string()) }
+        }
     }
 }
 

@@ -21,7 +21,7 @@ use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
 use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
 use crate::action::Action;
-use crate::llm::engine::{Generate, Prompt};
+use crate::llm::engine::{Generate, Prompt, StopReason};
 use crate::llm::LlmError;
 use crate::world::World;
 
@@ -213,6 +213,13 @@ impl Run<'_> {
                 return Err(StopCause::Error(format!("{role} call at node {node}: {e}")));
             }
         };
+        if g.stop == StopReason::Context {
+            self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
+                "kind": "context", "error": "the model's context is full", "so_far": g.text}));
+            return Err(StopCause::Error(format!(
+                "{role} call at node {node}: the model's context filled before the answer was complete"
+            )));
+        }
         let rec = CallRecord {
             role,
             node,
@@ -429,9 +436,8 @@ fn grammar_error(role: &str, node: NodeId, text: &str, e: &str) -> StopCause {
 }
 
 /// Whether the model stopped because the grammar was not complete within the token cap.
-// TODO(step): LlmError::TokenBudget once helper B's branch is merged.
 fn is_token_budget(e: &LlmError) -> bool {
-    matches!(e, LlmError::Decode(s) if s.contains("was not complete after"))
+    matches!(e, LlmError::TokenBudget { .. })
 }
 
 /// sha256 of the prompt's messages and the grammar, hex, first 16 characters.

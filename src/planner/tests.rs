@@ -276,7 +276,7 @@ fn the_depth_budget_shapes_the_grammars() {
 
 #[test]
 fn a_token_budget_error_is_a_rejected_attempt_and_other_errors_end_the_run_with_the_trace_intact() {
-    let too_long = || LlmError::Decode("the grammar was not complete after 48 tokens (so far: \"subgoal: a\"); raise max tokens".into());
+    let too_long = || LlmError::TokenBudget { max_tokens: 48, so_far: "subgoal: a".into() };
     let mut m = Scripted::new(&[]);
     m.answers = vec![
         Err(too_long()),

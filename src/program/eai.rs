@@ -17,7 +17,7 @@ use std::fmt;
 use serde::de::{Deserializer, MapAccess, Visitor};
 use serde_json::Value;
 
-use super::{Location, ParseError, ParseErrorKind, PlanFormat};
+use super::{Location, PlanFormat, PlanParseError, PlanParseErrorKind};
 use crate::action::{Action, ObjRef, Verb};
 
 const SHAPE: &str = "an object of actions such as {\"WALK\": [\"kitchen\", 11], \"STANDUP\": []}";
@@ -53,10 +53,10 @@ fn strip_fence(text: &str) -> &str {
     rest.strip_suffix("```").unwrap_or(rest).trim()
 }
 
-fn read_entries(text: &str) -> Result<Entries, ParseError> {
+fn read_entries(text: &str) -> Result<Entries, PlanParseError> {
     let body = strip_fence(text);
     let Some(start) = body.find('{') else {
-        return Err(ParseError::syntax(
+        return Err(PlanParseError::syntax(
             PlanFormat::Eai,
             Location::Line { line: 1, column: Some(1) },
             SHAPE,
@@ -84,7 +84,7 @@ fn read_entries(text: &str) -> Result<Entries, ParseError> {
             };
             let line = err.line().max(1);
             let column = if line == 1 { err.column() + first_col } else { err.column() };
-            Err(ParseError::syntax(
+            Err(PlanParseError::syntax(
                 PlanFormat::Eai,
                 Location::Line { line: line + line_offset, column: Some(column.max(1)) },
                 SHAPE,
@@ -94,19 +94,23 @@ fn read_entries(text: &str) -> Result<Entries, ParseError> {
     }
 }
 
-pub(super) fn parse(text: &str) -> Result<Vec<Action>, ParseError> {
+pub(super) fn parse(text: &str) -> Result<Vec<Action>, PlanParseError> {
     let Entries(entries) = read_entries(text)?;
     if entries.is_empty() {
-        return Err(ParseError { format: PlanFormat::Eai, location: Location::Whole, kind: ParseErrorKind::Empty });
+        return Err(PlanParseError {
+            format: PlanFormat::Eai,
+            location: Location::Whole,
+            kind: PlanParseErrorKind::Empty,
+        });
     }
     entries
         .into_iter()
         .enumerate()
         .map(|(i, (key, values))| {
-            let at = |kind| ParseError { format: PlanFormat::Eai, location: Location::Step { step: i + 1 }, kind };
-            let verb: Verb = key.parse().map_err(|e| at(ParseErrorKind::UnknownVerb(e)))?;
+            let at = |kind| PlanParseError { format: PlanFormat::Eai, location: Location::Step { step: i + 1 }, kind };
+            let verb: Verb = key.parse().map_err(|e| at(PlanParseErrorKind::UnknownVerb(e)))?;
             if values.len() % 2 != 0 {
-                return Err(at(ParseErrorKind::Syntax {
+                return Err(at(PlanParseErrorKind::Syntax {
                     expected: format!("the objects of \"{key}\" as name, id pairs, e.g. [\"soap\", 1002]"),
                     found: Value::Array(values).to_string(),
                 }));
@@ -114,30 +118,36 @@ pub(super) fn parse(text: &str) -> Result<Vec<Action>, ParseError> {
             let args = values
                 .chunks(2)
                 .map(|pair| {
-                    object(&pair[0], &pair[1]).ok_or_else(|| {
-                        at(ParseErrorKind::Syntax {
-                            expected: format!("an object name (a string) and an id (a number) in \"{key}\""),
+                    object(&pair[0], &pair[1]).map_err(|what| {
+                        at(PlanParseErrorKind::Syntax {
+                            expected: format!("{what} in \"{key}\""),
                             found: format!("{}, {}", pair[0], pair[1]),
                         })
                     })
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            Action::new(verb, args).map_err(|e| at(ParseErrorKind::WrongArity(e)))
+            Action::new(verb, args).map_err(|e| at(PlanParseErrorKind::WrongArity(e)))
         })
         .collect()
 }
 
-fn object(name: &Value, id: &Value) -> Option<ObjRef> {
-    let name = name.as_str()?.trim();
+/// One `name, id` pair; the error says which half is wrong and what was expected.
+fn object(name: &Value, id: &Value) -> Result<ObjRef, String> {
+    let name = name.as_str().map(str::trim).unwrap_or_default();
     if name.is_empty() {
-        return None;
+        return Err("an object name (a non-empty string) before the id".into());
     }
+    let range = || format!("an object id from 0 to {} (a scene node id)", u32::MAX);
     let id = match id {
-        Value::Number(n) => u32::try_from(n.as_u64()?).ok()?,
-        Value::String(s) => s.trim().parse().ok()?,
-        _ => return None,
+        Value::Number(n) if n.as_u64().is_some() => n.as_u64().and_then(|v| u32::try_from(v).ok()).ok_or_else(range)?,
+        Value::Number(_) => return Err("a whole, non-negative object id".into()),
+        Value::String(s) => match s.trim().parse::<u64>() {
+            Ok(v) => u32::try_from(v).map_err(|_| range())?,
+            Err(_) => return Err(format!("an object id (a number) after the name \"{name}\"")),
+        },
+        _ => return Err(format!("an object id (a number) after the name \"{name}\"")),
     };
-    Some(ObjRef::new(name, id))
+    Ok(ObjRef::new(name, id))
 }
 
 pub(super) fn write(actions: &[Action]) -> String {
@@ -195,10 +205,10 @@ mod tests {
         assert_eq!(e.to_string(), "eai plan, step 2: PUTIN takes 2 object(s), got 1");
 
         let e = parse(r#"{"TELEPORT": ["kitchen", 11]}"#).unwrap_err();
-        assert!(matches!(e.kind, ParseErrorKind::UnknownVerb(_)) && e.location == Location::Step { step: 1 });
+        assert!(matches!(e.kind, PlanParseErrorKind::UnknownVerb(_)) && e.location == Location::Step { step: 1 });
 
         let e = parse(r#"{"WALK": [11, "kitchen"]}"#).unwrap_err();
-        assert!(e.to_string().contains("an object name (a string) and an id"), "{e}");
+        assert!(e.to_string().contains("an object name (a non-empty string) before the id"), "{e}");
     }
 
     #[test]
@@ -207,6 +217,16 @@ mod tests {
         assert_eq!(e.location, Location::Line { line: 3, column: Some(2) }, "{e}");
         let e = parse("no plan here").unwrap_err();
         assert!(e.to_string().contains("expected an object of actions"), "{e}");
-        assert_eq!(parse("{}").unwrap_err().kind, ParseErrorKind::Empty);
+        assert_eq!(parse("{}").unwrap_err().kind, PlanParseErrorKind::Empty);
+    }
+
+    #[test]
+    fn an_out_of_range_id_is_reported_as_an_id_problem() {
+        let e = parse(r#"{"WALK": ["apple", 99999999999]}"#).unwrap_err().to_string();
+        assert!(e.contains("an object id from 0 to 4294967295"), "{e}");
+        let e = parse(r#"{"WALK": ["apple", -3]}"#).unwrap_err().to_string();
+        assert!(e.contains("whole, non-negative object id"), "{e}");
+        let e = parse(r#"{"WALK": [12, 12]}"#).unwrap_err().to_string();
+        assert!(e.contains("an object name"), "{e}");
     }
 }

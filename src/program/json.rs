@@ -4,7 +4,7 @@
 
 use serde::Deserialize;
 
-use super::{Location, ParseError, ParseErrorKind, PlanFormat};
+use super::{Location, PlanFormat, PlanParseError, PlanParseErrorKind};
 use crate::action::{Action, ObjRef, Verb};
 
 /// A step as written, before its verb and arity are checked (so that errors can name the step).
@@ -16,9 +16,9 @@ struct RawStep {
     args: Vec<ObjRef>,
 }
 
-pub(super) fn parse(text: &str) -> Result<Vec<Action>, ParseError> {
+pub(super) fn parse(text: &str) -> Result<Vec<Action>, PlanParseError> {
     let raw: Vec<RawStep> = serde_json::from_str(text).map_err(|e| {
-        ParseError::syntax(
+        PlanParseError::syntax(
             PlanFormat::Json,
             Location::Line { line: e.line().max(1), column: Some(e.column().max(1)) },
             "a JSON list of steps such as [{\"verb\": \"WALK\", \"args\": [{\"class_name\": \"kitchen\", \"id\": 11}]}]",
@@ -26,14 +26,18 @@ pub(super) fn parse(text: &str) -> Result<Vec<Action>, ParseError> {
         )
     })?;
     if raw.is_empty() {
-        return Err(ParseError { format: PlanFormat::Json, location: Location::Whole, kind: ParseErrorKind::Empty });
+        return Err(PlanParseError {
+            format: PlanFormat::Json,
+            location: Location::Whole,
+            kind: PlanParseErrorKind::Empty,
+        });
     }
     raw.into_iter()
         .enumerate()
         .map(|(i, s)| {
-            let at = |kind| ParseError { format: PlanFormat::Json, location: Location::Step { step: i + 1 }, kind };
-            let verb: Verb = s.verb.parse().map_err(|e| at(ParseErrorKind::UnknownVerb(e)))?;
-            Action::new(verb, s.args).map_err(|e| at(ParseErrorKind::WrongArity(e)))
+            let at = |kind| PlanParseError { format: PlanFormat::Json, location: Location::Step { step: i + 1 }, kind };
+            let verb: Verb = s.verb.parse().map_err(|e| at(PlanParseErrorKind::UnknownVerb(e)))?;
+            Action::new(verb, s.args).map_err(|e| at(PlanParseErrorKind::WrongArity(e)))
         })
         .collect()
 }
@@ -79,6 +83,6 @@ mod tests {
         let e = parse("[{\"verb\":\"WALK\",\"objects\":[]}]").unwrap_err();
         assert!(e.to_string().contains("unknown field `objects`"), "{e}");
 
-        assert_eq!(parse("[]").unwrap_err().kind, ParseErrorKind::Empty);
+        assert_eq!(parse("[]").unwrap_err().kind, PlanParseErrorKind::Empty);
     }
 }

@@ -6,14 +6,16 @@
 //! Both `(1002)` and `(1.1002)` are accepted; the instance number is not kept (EAI drops it too).
 //!
 //! A file may start with header lines (title, then description), ended by a blank line or by the
-//! first step; after the header every non-blank line must be a step, except `#` comment lines.
+//! first step; after the header every non-blank line must be a step, except `#` comment lines. A line
+//! that looks like a step (it holds `[VERB]`) is never taken as a title: if it does not parse, the
+//! error names it (`Step 1: [WALK] <apple> (12)` is an error at line 1, not a title).
 
-use super::{column_of, excerpt, Location, ParseError, ParseErrorKind, PlanFormat, Program};
+use super::{column_of, excerpt, Location, PlanFormat, PlanParseError, PlanParseErrorKind, Program};
 use crate::action::{Action, ObjRef, Verb};
 
 const EXAMPLE: &str = "an action such as `[WALK] <kitchen> (11)`";
 
-pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
+pub(super) fn parse(text: &str) -> Result<Program, PlanParseError> {
     let mut lines = text.lines().enumerate().peekable();
     // Header: leading lines that are not steps, up to a blank line or the first step.
     let mut header: Vec<&str> = Vec::new();
@@ -23,7 +25,7 @@ pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
             lines.next();
             continue;
         }
-        if t.is_empty() || t.starts_with('[') || t.starts_with('#') {
+        if t.is_empty() || t.starts_with('[') || t.starts_with('#') || looks_like_step(t) {
             break;
         }
         header.push(t);
@@ -38,7 +40,20 @@ pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
         actions.push(parse_at(line, i + 1)?);
     }
     if actions.is_empty() {
-        return Err(ParseError { format: PlanFormat::Lines, location: Location::Whole, kind: ParseErrorKind::Empty });
+        if let Some(first) = header.first() {
+            // Only prose: say what was read as the header, and what a step looks like.
+            return Err(PlanParseError::syntax(
+                PlanFormat::Lines,
+                Location::Whole,
+                format!("at least one step line such as `[WALK] <kitchen> (11)` (the text was read as a title and {} description line(s))", header.len() - 1),
+                excerpt(first),
+            ));
+        }
+        return Err(PlanParseError {
+            format: PlanFormat::Lines,
+            location: Location::Whole,
+            kind: PlanParseErrorKind::Empty,
+        });
     }
     let title = header.first().map(|s| s.to_string());
     let description = (header.len() > 1).then(|| header[1..].join("\n"));
@@ -46,13 +61,13 @@ pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
 }
 
 /// Parses one step line, e.g. `[PUTBACK] <soap> (1.1002) <sink> (1001)`; errors say line 1.
-pub fn parse_step_line(line: &str) -> Result<Action, ParseError> {
+pub fn parse_step_line(line: &str) -> Result<Action, PlanParseError> {
     parse_at(line, 1)
 }
 
-fn parse_at(line: &str, line_no: usize) -> Result<Action, ParseError> {
+fn parse_at(line: &str, line_no: usize) -> Result<Action, PlanParseError> {
     let err = |at: usize, expected: &str, found: &str| {
-        ParseError::syntax(
+        PlanParseError::syntax(
             PlanFormat::Lines,
             Location::Line { line: line_no, column: Some(column_of(line, at)) },
             expected,
@@ -62,16 +77,24 @@ fn parse_at(line: &str, line_no: usize) -> Result<Action, ParseError> {
     let mut pos = line.len() - line.trim_start().len();
     let rest = &line[pos..];
     if !rest.starts_with('[') {
+        if let Some(at) = rest.find('[').filter(|_| looks_like_step(rest)) {
+            let before = rest[..at].trim_end();
+            return Err(err(
+                pos,
+                &format!("the line to start with the action ('[' …); remove '{before}' before it"),
+                rest,
+            ));
+        }
         return Err(err(pos, EXAMPLE, rest));
     }
     let Some(close) = rest.find(']') else {
         return Err(err(pos, "']' closing the action name", rest));
     };
     let verb_text = &rest[1..close];
-    let verb: Verb = verb_text.parse().map_err(|e| ParseError {
+    let verb: Verb = verb_text.parse().map_err(|e| PlanParseError {
         format: PlanFormat::Lines,
         location: Location::Line { line: line_no, column: Some(column_of(line, pos + 1)) },
-        kind: ParseErrorKind::UnknownVerb(e),
+        kind: PlanParseErrorKind::UnknownVerb(e),
     })?;
     pos += close + 1;
     let mut args = Vec::new();
@@ -108,10 +131,20 @@ fn parse_at(line: &str, line_no: usize) -> Result<Action, ParseError> {
         pos += paren + 1;
         args.push(ObjRef::new(name, id));
     }
-    Action::new(verb, args).map_err(|e| ParseError {
+    Action::new(verb, args).map_err(|e| PlanParseError {
         format: PlanFormat::Lines,
         location: Location::Line { line: line_no, column: None },
-        kind: ParseErrorKind::WrongArity(e),
+        kind: PlanParseErrorKind::WrongArity(e),
+    })
+}
+
+/// Whether a line holds an action name in brackets (`[WALK]`, `[PUTBACK]`): such a line is meant as a
+/// step, wherever the bracket is.
+fn looks_like_step(line: &str) -> bool {
+    line.match_indices('[').any(|(i, _)| {
+        let rest = &line[i + 1..];
+        let name_len = rest.bytes().take_while(|b| b.is_ascii_alphabetic() || *b == b'_').count();
+        name_len > 0 && rest[name_len..].starts_with(']')
     })
 }
 
@@ -181,7 +214,7 @@ mod tests {
         assert_eq!(p.actions[1].args[0], ObjRef::new("living_room", 336));
     }
 
-    fn err_of(text: &str) -> ParseError {
+    fn err_of(text: &str) -> PlanParseError {
         parse(text).unwrap_err()
     }
 
@@ -189,7 +222,7 @@ mod tests {
     fn unknown_verb_names_line_and_column() {
         let e = err_of("[WALK] <kitchen> (11)\n[FLY] <kitchen> (11)\n");
         assert_eq!(e.location, Location::Line { line: 2, column: Some(2) });
-        assert!(matches!(e.kind, ParseErrorKind::UnknownVerb(_)));
+        assert!(matches!(e.kind, PlanParseErrorKind::UnknownVerb(_)));
         let s = e.to_string();
         assert!(s.starts_with("lines plan, line 2, column 2: unknown action 'FLY'"), "{s}");
     }
@@ -200,7 +233,7 @@ mod tests {
         assert_eq!(e.location, Location::Line { line: 3, column: None });
         assert_eq!(e.to_string(), "lines plan, line 3: PUTBACK takes 2 object(s), got 1");
         let e = err_of("[STANDUP] <chair> (5)");
-        assert!(matches!(e.kind, ParseErrorKind::WrongArity(w) if w.expected == 0 && w.got == 1));
+        assert!(matches!(e.kind, PlanParseErrorKind::WrongArity(w) if w.expected == 0 && w.got == 1));
     }
 
     #[test]
@@ -222,7 +255,7 @@ mod tests {
             // Put the bad step on line 2, after a good one, to check the line number too.
             let e = err_of(&format!("[WALK] <kitchen> (11)\n{line}\n"));
             assert_eq!(e.location, Location::Line { line: 2, column: Some(col) }, "{line}: {e}");
-            assert!(matches!(e.kind, ParseErrorKind::Syntax { .. }), "{line}: {e}");
+            assert!(matches!(e.kind, PlanParseErrorKind::Syntax { .. }), "{line}: {e}");
             assert!(e.to_string().contains(needle), "{line}: {e}");
         }
     }
@@ -240,13 +273,35 @@ mod tests {
 
     #[test]
     fn a_plan_without_steps_is_an_error() {
-        assert_eq!(err_of("Title\nDescription\n\n").kind, ParseErrorKind::Empty);
-        assert_eq!(err_of("").kind, ParseErrorKind::Empty);
+        // A header and no steps: the error says what was read as the header.
+        let e = err_of("Title\nDescription\n\n");
+        assert!(e.to_string().contains("at least one step line") && e.to_string().contains("'Title'"), "{e}");
+        assert_eq!(err_of("").kind, PlanParseErrorKind::Empty);
     }
 
     #[test]
     fn single_line_parser() {
         let a = parse_step_line("[PUTBACK] <soap> (1.1002) <sink> (1001)").unwrap();
         assert_eq!(a.to_string(), "[PUTBACK] <soap> (1002) <sink> (1001)");
+    }
+
+    #[test]
+    fn a_title_is_recognised_only_when_it_is_not_a_step() {
+        // A title before the steps is kept as the title, and the first step is not lost.
+        let p = parse("Put away\n[WALK] <apple> (12)\n[GRAB] <apple> (12)\n").unwrap();
+        assert_eq!((p.title.as_deref(), p.actions.len()), (Some("Put away"), 2));
+        // A line holding [VERB] is a step, never a title: if it does not parse, the error names it.
+        let e = parse("Step 1: [WALK] <apple> (12)\n[GRAB] <apple> (12)\n").unwrap_err();
+        assert_eq!(e.location, Location::Line { line: 1, column: Some(1) }, "{e}");
+        assert!(e.to_string().contains("remove 'Step 1:' before it"), "{e}");
+        let e = parse("1. [WALK] <apple> (12)\n").unwrap_err();
+        assert!(e.to_string().contains("line 1"), "{e}");
+    }
+
+    #[test]
+    fn a_plan_that_is_only_prose_says_what_was_read_and_what_a_step_looks_like() {
+        let e = parse("First walk to the apple.\nThen grab it.\n").unwrap_err();
+        let m = e.to_string();
+        assert!(m.contains("at least one step line") && m.contains("'First walk to the apple.'"), "{m}");
     }
 }

@@ -45,7 +45,7 @@ impl PlanFormat {
     /// Guesses the format from the text: an object (possibly in a ```json fence) is EAI's, a list
     /// whose first element is an object is JSON, anything else is program lines.
     pub fn detect(text: &str) -> PlanFormat {
-        let t = text.trim_start();
+        let t = strip_bom(text).trim_start();
         let t = t.strip_prefix("```json").or_else(|| t.strip_prefix("```")).unwrap_or(t).trim_start();
         if t.starts_with('{') {
             return PlanFormat::Eai;
@@ -105,7 +105,7 @@ impl fmt::Display for Location {
 
 /// What is wrong at a [`Location`].
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum ParseErrorKind {
+pub enum PlanParseErrorKind {
     /// The text does not have the expected shape.
     #[error("expected {expected}, found {found}")]
     Syntax { expected: String, found: String },
@@ -121,15 +121,19 @@ pub enum ParseErrorKind {
 /// A plan that could not be read: the format, where, and what was expected.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{format} plan, {location}: {kind}")]
-pub struct ParseError {
+pub struct PlanParseError {
     pub format: PlanFormat,
     pub location: Location,
-    pub kind: ParseErrorKind,
+    pub kind: PlanParseErrorKind,
 }
 
-impl ParseError {
+impl PlanParseError {
     fn syntax(format: PlanFormat, location: Location, expected: impl Into<String>, found: impl Into<String>) -> Self {
-        ParseError { format, location, kind: ParseErrorKind::Syntax { expected: expected.into(), found: found.into() } }
+        PlanParseError {
+            format,
+            location,
+            kind: PlanParseErrorKind::Syntax { expected: expected.into(), found: found.into() },
+        }
     }
 }
 
@@ -146,8 +150,9 @@ impl Program {
         Program { title: None, description: None, actions }
     }
 
-    /// Reads a plan in the given format.
-    pub fn parse(text: &str, format: PlanFormat) -> Result<Program, ParseError> {
+    /// Reads a plan in the given format. A leading byte-order mark is ignored.
+    pub fn parse(text: &str, format: PlanFormat) -> Result<Program, PlanParseError> {
+        let text = strip_bom(text);
         match format {
             PlanFormat::Lines => lines::parse(text),
             PlanFormat::Json => json::parse(text).map(Program::new),
@@ -156,7 +161,7 @@ impl Program {
     }
 
     /// Reads a plan whose format is guessed with [`PlanFormat::detect`].
-    pub fn parse_auto(text: &str) -> Result<Program, ParseError> {
+    pub fn parse_auto(text: &str) -> Result<Program, PlanParseError> {
         Program::parse(text, PlanFormat::detect(text))
     }
 
@@ -168,6 +173,12 @@ impl Program {
             PlanFormat::Eai => eai::write(&self.actions),
         }
     }
+}
+
+/// The text without a leading UTF-8 byte-order mark (which editors on Windows add, and which no
+/// parser here should see as content).
+pub fn strip_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
 }
 
 /// Characters counted from 1, for column numbers.
@@ -248,5 +259,17 @@ mod tests {
         assert_eq!("EAI".parse::<PlanFormat>().unwrap(), PlanFormat::Eai);
         let e = "yaml".parse::<PlanFormat>().unwrap_err().to_string();
         assert!(e.contains("'yaml'") && e.contains("lines, json or eai"), "{e}");
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_stripped_in_every_format() {
+        let bom = |s: &str| format!("\u{feff}{s}");
+        let lines = Program::parse(&bom("[WALK] <apple> (12)\n[GRAB] <apple> (12)\n"), PlanFormat::Lines).unwrap();
+        assert_eq!((lines.title, lines.actions.len()), (None, 2), "the BOM line is not a title");
+        let json = bom(r#"[{"verb": "WALK", "args": [{"class_name": "apple", "id": 12}]}]"#);
+        assert_eq!(PlanFormat::detect(&json), PlanFormat::Json);
+        assert_eq!(Program::parse_auto(&json).unwrap().actions.len(), 1);
+        let eai = bom(r#"{"WALK": ["apple", 12]}"#);
+        assert_eq!(Program::parse_auto(&eai).unwrap().actions.len(), 1);
     }
 }

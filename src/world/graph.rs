@@ -69,8 +69,8 @@ pub struct SceneFile {
 /// Why a scene graph could not be read or used.
 #[derive(Debug, thiserror::Error)]
 pub enum GraphError {
-    #[error("cannot read scene file {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    #[error("cannot read scene file {path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{origin}:{line}:{column}: invalid scene graph JSON: {message}")]
     Json { origin: String, line: usize, column: usize, message: String },
     #[error(
@@ -93,6 +93,8 @@ struct AnyScene {
 
 /// Parses scene JSON text; `origin` (a path or a name) is used in error messages.
 pub fn parse_scene(text: &str, origin: &str) -> Result<SceneFile, GraphError> {
+    // A byte-order mark is not JSON; editors on Windows add one.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let any: AnyScene = serde_json::from_str(text).map_err(|e| GraphError::Json {
         origin: origin.to_string(),
         line: e.line(),
@@ -118,7 +120,7 @@ pub fn parse_scene(text: &str, origin: &str) -> Result<SceneFile, GraphError> {
 /// Reads and parses a scene file from disk.
 pub fn read_scene(path: &Path) -> Result<SceneFile, GraphError> {
     let text =
-        std::fs::read_to_string(path).map_err(|source| GraphError::Io { path: path.display().to_string(), source })?;
+        std::fs::read_to_string(path).map_err(|error| GraphError::Io { path: path.display().to_string(), error })?;
     parse_scene(&text, &path.display().to_string())
 }
 

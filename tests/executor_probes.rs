@@ -1,19 +1,23 @@
-//! Development probe (ignored test): runs the EAI gold programs through the executor from an
-//! unpacked copy of the data, to check executor fidelity. The product's gold evaluation lives in
-//! `eval`; this only reports which steps fail and why.
-//! Run: `WORLD_GOLD_GRAPHS=/tmp/.../init_and_final_graphs cargo test --lib gold_probe -- --ignored --nocapture`.
+//! Development probes of the executor's fidelity (ignored tests, outside the default test command):
+//! the EAI gold programs from an unpacked copy of the scene graphs, and a differential run against
+//! EAI's own executor. The product's gold evaluation is `step eval gold` (tests/eai_gold.rs); these only
+//! report which steps fail and why.
+//! Run: `WORLD_GOLD_GRAPHS=/tmp/.../init_and_final_graphs cargo test --test executor_probes -- --ignored --nocapture`
+//! (the programs are read from `$STEP_VH_DATA/eai/executable_programs`).
 
 #[cfg(test)]
 mod tests {
-    use crate::program::parse_step_line;
-    use crate::world::World;
     use std::path::Path;
+    use step::program::parse_step_line;
+    use step::world::World;
 
     #[test]
     #[ignore]
     fn gold_programs_execute() {
         let Ok(dir) = std::env::var("WORLD_GOLD_GRAPHS") else { return };
-        let progs = Path::new("/work/shared/bench/virtualhome/eai/executable_programs");
+        let data = std::env::var("STEP_VH_DATA").unwrap_or_else(|_| "../shared/bench/virtualhome".into());
+        let progs = Path::new(&data).join("eai/executable_programs");
+        let progs = progs.as_path();
         let mut names: Vec<_> = std::fs::read_dir(progs).unwrap().map(|e| e.unwrap().file_name()).collect();
         names.sort();
         let (mut ok, mut total, mut load_ns, mut exec_ns, mut final_match, mut build_ns) =
@@ -23,7 +27,7 @@ mod tests {
             let stem = n.trim_end_matches(".txt");
             let text = std::fs::read_to_string(progs.join(&n)).unwrap();
             let t0 = std::time::Instant::now();
-            let scene = crate::world::read_scene(&Path::new(&dir).join(format!("{stem}.json"))).unwrap();
+            let scene = step::world::read_scene(&Path::new(&dir).join(format!("{stem}.json"))).unwrap();
             let tb = std::time::Instant::now();
             let mut w = World::from_graph(&scene.init, stem).unwrap();
             build_ns += tb.elapsed().as_nanos();
@@ -57,7 +61,7 @@ mod tests {
                             );
                         }
                     }
-                    Err(e) if e.eai_kind == crate::world::FailureKind::AdditionalStep => {
+                    Err(e) if e.eai_kind == step::world::FailureKind::AdditionalStep => {
                         println!("{stem}: skipped (additional): {} [{}]", e.message, e.kind)
                     }
                     Err(e) => {
@@ -104,10 +108,10 @@ mod tests {
 /// edges and states to `WORLD_DIFF_OUT`, for comparison with EAI's own executor run on the same plans.
 #[cfg(test)]
 mod diff {
-    use crate::program::parse_step_line;
-    use crate::world::{FailureKind, World};
     use serde_json::{json, Value};
     use std::path::Path;
+    use step::program::parse_step_line;
+    use step::world::{FailureKind, World};
 
     #[test]
     #[ignore]
@@ -153,7 +157,7 @@ mod diff {
             let edges: Vec<Value> = w
                 .edges()
                 .into_iter()
-                .filter(|e| e.1 != crate::world::Relation::Close)
+                .filter(|e| e.1 != step::world::Relation::Close)
                 .map(|(f, r, t)| json!([f, r.name(), t]))
                 .collect();
             let states: Vec<Value> = w
@@ -164,7 +168,7 @@ mod diff {
                     json!([n.id, s])
                 })
                 .collect();
-            let char_close = w.related(w.character(), crate::world::Relation::Close);
+            let char_close = w.related(w.character(), step::world::Relation::Close);
             results.push(json!({"codes": codes, "edges": edges, "states": states, "char_close": char_close}));
         }
         std::fs::write(out, serde_json::to_string(&results).unwrap()).unwrap();

@@ -1,0 +1,86 @@
+//! Arguments shared by several commands, in one place so that commands never import from each
+//! other: where tasks come from, the plan format, and the knobs of commands that run inference.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::eval::TaskSource;
+use crate::program::PlanFormat;
+
+/// Where tasks come from (the commands that take tasks).
+#[derive(Args, Debug, Clone, Default)]
+pub struct TaskArgs {
+    /// A task file of your own: a JSON list of {"id", "scene" (a scene graph JSON file relative to the
+    /// task file, or an EAI task id such as 27_2), "title", "description" (optional), "vh_goal":
+    /// {"goal": [...], "actions": [...]} in EAI's shape, "gold" (optional list of program lines)}.
+    /// See the README's "Tasks". Without it, EAI's VirtualHome tasks are used.
+    #[arg(long, value_name = "FILE")]
+    pub tasks_file: Option<PathBuf>,
+    /// The VirtualHome benchmark data directory (holding eai/ and resources/); default: $STEP_VH_DATA,
+    /// else ../shared/bench/virtualhome beside the repo.
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+}
+
+impl TaskArgs {
+    pub fn source(&self) -> TaskSource {
+        TaskSource { tasks_file: self.tasks_file.clone(), data: self.data.clone() }
+    }
+}
+
+/// `--format`: a plan format by name (`PlanFormat`'s own `FromStr`).
+pub fn parse_plan_format(s: &str) -> Result<PlanFormat, String> {
+    s.parse::<PlanFormat>().map_err(|e| e.to_string())
+}
+
+/// Knobs of the commands that run inference (`generate`, `bench llm`).
+#[derive(Args, Debug, Clone, Default)]
+pub struct InferenceArgs {
+    /// CPU threads for inference (default: the machine's cores; more than the machine has is capped,
+    /// with a warning). Read once, before the model loads.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..), value_name = "N")]
+    pub threads: Option<u64>,
+}
+
+impl InferenceArgs {
+    /// Sizes candle's worker pool. candle reads these variables the first time it is used, so this
+    /// runs before any model is loaded.
+    pub fn apply(&self) {
+        let Some(asked) = self.threads else { return };
+        let n = cap_threads(asked as usize, machine_threads());
+        if n < asked as usize {
+            eprintln!("warning: --threads {asked} is more than this machine's {n} hardware threads; using {n}");
+        }
+        std::env::set_var("CANDLE_NUM_THREADS", n.to_string());
+        std::env::set_var("RAYON_NUM_THREADS", n.to_string());
+    }
+}
+
+/// The hardware threads this process may use.
+pub fn machine_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// A thread count capped to the machine (oversubscribing a CPU-bound pool only slows it down).
+pub fn cap_threads(asked: usize, machine: usize) -> usize {
+    asked.clamp(1, machine.max(1))
+}
+
+/// Reads a text input: a file, or standard input for `-` (which must be piped in). A byte-order
+/// mark is dropped. Errors name the path.
+pub fn read_input(path: &std::path::Path, what: &str) -> anyhow::Result<String> {
+    use anyhow::Context;
+    use std::io::{IsTerminal, Read};
+    let text = if path.as_os_str() == "-" {
+        if std::io::stdin().is_terminal() {
+            anyhow::bail!("{what} '-' reads standard input, but nothing is piped in");
+        }
+        let mut s = String::new();
+        std::io::stdin().read_to_string(&mut s).with_context(|| format!("reading the {what} from standard input"))?;
+        s
+    } else {
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {what} {}", path.display()))?
+    };
+    Ok(crate::program::strip_bom(&text).to_string())
+}
