@@ -18,70 +18,88 @@ fn is_text_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, ' ' | ',' | '.' | '\'' | '_' | '-')
 }
 
-/// The action lines a grammar admits (the stand-in enumerates them all).
+/// The action lines a grammar admits: verbs over one object list (format/typed; the stand-in has no
+/// property filter, so typed is format here), or exactly these actions (feasible).
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ActionSet(pub Vec<Action>);
+pub enum ActionSet {
+    Slots(Vec<Verb>, Vec<ObjRef>),
+    Exact(Vec<Action>),
+}
 
 impl ActionSet {
     pub fn build(strength: Strength, world: &World, ids: &[u32]) -> ActionSet {
-        let objs: Vec<ObjRef> = {
-            let mut v: Vec<ObjRef> = ids
-                .iter()
-                .filter(|&&id| id != world.character())
-                .filter_map(|&id| world.node(id).map(|n| ObjRef::new(n.class_name, id)))
-                .collect();
-            v.sort_by_key(|o| o.id);
-            v.dedup();
-            v
-        };
         match strength {
-            Strength::Feasible => ActionSet(world.feasible_actions_among(ids)),
-            // The stand-in has no property filter: typed is format here.
+            Strength::Feasible => ActionSet::Exact(world.feasible_actions_among(ids)),
             Strength::Format | Strength::Typed => {
-                let mut out = Vec::new();
-                for &verb in Verb::ALL {
-                    match verb.arity() {
-                        0 => out.push(Action { verb, args: vec![] }),
-                        1 => out.extend(objs.iter().map(|o| Action { verb, args: vec![o.clone()] })),
-                        _ => {
-                            for a in &objs {
-                                for b in &objs {
-                                    if a != b {
-                                        out.push(Action { verb, args: vec![a.clone(), b.clone()] });
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-                ActionSet(out)
+                let mut objs: Vec<ObjRef> = ids
+                    .iter()
+                    .filter(|&&id| id != world.character())
+                    .filter_map(|&id| world.node(id).map(|n| ObjRef::new(n.class_name, id)))
+                    .collect();
+                objs.sort_by_key(|o| o.id);
+                objs.dedup();
+                ActionSet::Slots(Verb::ALL.to_vec(), objs)
             }
         }
     }
 
     pub fn exact(actions: Vec<Action>) -> ActionSet {
-        ActionSet(actions)
+        ActionSet::Exact(actions)
     }
 
     pub fn contains(&self, a: &Action) -> bool {
-        self.0.contains(a)
+        match self {
+            ActionSet::Exact(v) => v.contains(a),
+            ActionSet::Slots(verbs, objs) => verbs.contains(&a.verb) && a.args.iter().all(|o| objs.contains(o)),
+        }
     }
 
     pub fn len(&self) -> usize {
-        self.0.len()
+        match self {
+            ActionSet::Exact(v) => v.len(),
+            ActionSet::Slots(verbs, objs) => verbs.iter().map(|v| objs.len().pow(v.arity() as u32)).sum(),
+        }
     }
 
     pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
+        self.len() == 0
     }
 
     fn rule(&self) -> String {
-        let alts: Vec<String> = self.0.iter().map(|a| lark_string(&a.to_string())).collect();
-        format!("action: {}\n", alts.join(" | "))
+        match self {
+            ActionSet::Exact(v) => {
+                let alts: Vec<String> = v.iter().map(|a| lark_string(&a.to_string())).collect();
+                format!("action: {}\n", alts.join(" | "))
+            }
+            ActionSet::Slots(verbs, objs) => {
+                let alts: Vec<String> = verbs
+                    .iter()
+                    .map(|v| match v.arity() {
+                        0 => lark_string(&format!("[{}]", v.name())),
+                        1 => format!("{} obj", lark_string(&format!("[{}] ", v.name()))),
+                        _ => format!("{} obj {} obj", lark_string(&format!("[{}] ", v.name())), lark_string(" ")),
+                    })
+                    .collect();
+                let o: Vec<String> = objs.iter().map(|o| lark_string(&o.to_string())).collect();
+                format!("action: {}\nobj: {}\n", alts.join(" | "), o.join(" | "))
+            }
+        }
     }
 
     fn parse(&self, s: &str) -> Result<Action, String> {
-        self.0.iter().find(|a| a.to_string() == s).cloned().ok_or_else(|| format!("{s:?} is not an admitted action"))
+        let found = match self {
+            ActionSet::Exact(v) => v.iter().find(|a| a.to_string() == s).cloned(),
+            ActionSet::Slots(verbs, objs) => verbs.iter().find_map(|&verb| {
+                let arity = verb.arity();
+                let candidates: Vec<Vec<ObjRef>> = match arity {
+                    0 => vec![vec![]],
+                    1 => objs.iter().map(|o| vec![o.clone()]).collect(),
+                    _ => objs.iter().flat_map(|a| objs.iter().map(move |b| vec![a.clone(), b.clone()])).collect(),
+                };
+                candidates.into_iter().map(|args| Action { verb, args }).find(|a| a.to_string() == s)
+            }),
+        };
+        found.ok_or_else(|| format!("{s:?} is not an admitted action"))
     }
 }
 
