@@ -188,8 +188,8 @@ impl Default for PlannerConfig {
             random_actions: 30,
             oracle_stop: false,
             observe_budget: 600,
-            subgoal_chars: 60,
-            reason_chars: 60,
+            subgoal_chars: 40,
+            reason_chars: 48,
         }
     }
 }
