@@ -195,7 +195,9 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             }
             "status" => {
                 let st = v["status"].as_str().unwrap_or("");
-                if matches!(st, "abandoned") || (st == "executed" && v["why"].as_str() == Some("all its steps are done")) {
+                if matches!(st, "abandoned")
+                    || (st == "executed" && v["why"].as_str() == Some("all its steps are done"))
+                {
                     eprintln!("{}    [{st}: {}]", indent(node, &depth_of), v["why"].as_str().unwrap_or(""));
                 }
             }
@@ -236,7 +238,13 @@ fn config(args: &PlanArgs) -> anyhow::Result<PlannerConfig> {
 }
 
 /// The request and the oracle for a scene record.
-fn request(instruction: Option<&str>, context: Option<String>, world: &World, task: Option<&Task>, oracle: bool) -> anyhow::Result<PlanRequest> {
+fn request(
+    instruction: Option<&str>,
+    context: Option<String>,
+    world: &World,
+    task: Option<&Task>,
+    oracle: bool,
+) -> anyhow::Result<PlanRequest> {
     let instruction = match (instruction, task) {
         (Some(i), _) => i.to_string(),
         (None, Some(t)) => format!("{}. {}", t.title.trim_end_matches('.'), t.description),
@@ -296,7 +304,12 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn report(json_out: bool, out: &PlanOutcome, goals: Option<&crate::eval::goal::GoalCheck>, model: &Path) -> anyhow::Result<()> {
+fn report(
+    json_out: bool,
+    out: &PlanOutcome,
+    goals: Option<&crate::eval::goal::GoalCheck>,
+    model: &Path,
+) -> anyhow::Result<()> {
     let s = &out.stats;
     let node_ms: Vec<f64> = s.calls.iter().map(|c| c.total_ms).collect();
     if json_out {
@@ -370,13 +383,24 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let (world, task) = load_scene(&meta["scene"])?;
     let r = &h["request"];
     let instruction = r["instruction"].as_str().ok_or_else(|| anyhow!("the trace's header has no instruction"))?;
-    let mut req = request(Some(instruction), r["context"].as_str().map(str::to_string), &world, task.as_ref(), r["oracle"].as_bool() == Some(true))?;
-    req.focus = r["focus"].as_array().map(|a| a.iter().filter_map(|x| x.as_u64().map(|n| n as u32)).collect()).unwrap_or_default();
+    let mut req = request(
+        Some(instruction),
+        r["context"].as_str().map(str::to_string),
+        &world,
+        task.as_ref(),
+        r["oracle"].as_bool() == Some(true),
+    )?;
+    req.focus = r["focus"]
+        .as_array()
+        .map(|a| a.iter().filter_map(|x| x.as_u64().map(|n| n as u32)).collect())
+        .unwrap_or_default();
     let env_name = h["env"].as_str().unwrap_or("sim");
     let mut env = make_env(env_name, world, req.focus.clone())?;
     let model = match &args.model {
         Some(m) => resolve_model(m)?,
-        None => PathBuf::from(meta["model"]["path"].as_str().ok_or_else(|| anyhow!("the trace names no model; pass --model"))?),
+        None => PathBuf::from(
+            meta["model"]["path"].as_str().ok_or_else(|| anyhow!("the trace names no model; pass --model"))?,
+        ),
     };
     let fp = model_fingerprint(&model);
     if args.model.is_none() && fp != meta["model"] {

@@ -28,8 +28,8 @@ use crate::llm::sample::Sampling;
 use crate::world::World;
 
 pub use env::{DryRunEnv, Env, EnvError, Outcome, SimEnv};
-pub use trace::TraceWriter;
 pub use planner::ContextMode;
+pub use trace::TraceWriter;
 pub use tree::{NodeId, Status, SubgoalTree, TreeNode};
 
 // TODO(grammar): replaced by `pub use crate::grammar::Strength` when helper C's branch is merged.
@@ -83,10 +83,7 @@ impl std::str::FromStr for PlannerKind {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         PlannerKind::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
-            format!(
-                "unknown planner '{s}': choose one of {}",
-                PlannerKind::ALL.map(|k| k.name()).join(", ")
-            )
+            format!("unknown planner '{s}': choose one of {}", PlannerKind::ALL.map(|k| k.name()).join(", "))
         })
     }
 }
@@ -307,7 +304,9 @@ impl PlannerConfig {
         let usize_of = |v: &Value, k: &str| -> Result<Option<usize>, String> {
             match v.get(k) {
                 None | Some(Value::Null) => Ok(None),
-                Some(x) => x.as_u64().map(|n| Some(n as usize)).ok_or_else(|| format!("settings.{k}: not a number: {x}")),
+                Some(x) => {
+                    x.as_u64().map(|n| Some(n as usize)).ok_or_else(|| format!("settings.{k}: not a number: {x}"))
+                }
             }
         };
         if let Some(k) = v.get("kind").and_then(Value::as_str) {

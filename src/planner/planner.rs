@@ -193,7 +193,13 @@ impl Run<'_> {
 
     /// One model call under `lark`. `Ok(None)`: the grammar was not complete within the token cap,
     /// which the caller treats as a rejected attempt.
-    fn call(&mut self, role: &'static str, node: NodeId, prompt: &Prompt, lark: &str) -> Result<Option<String>, StopCause> {
+    fn call(
+        &mut self,
+        role: &'static str,
+        node: NodeId,
+        prompt: &Prompt,
+        lark: &str,
+    ) -> Result<Option<String>, StopCause> {
         self.check_global()?;
         let hash = prompt_hash(prompt, lark);
         let t = Instant::now();
@@ -203,19 +209,28 @@ impl Run<'_> {
         let g = match r {
             Ok(g) => g,
             Err(e) if is_token_budget(&e) => {
-                self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
-                    "kind": "token_budget", "error": e.to_string()}));
+                self.trace.event(
+                    "call_error",
+                    json!({"role": role, "node": node, "prompt_hash": hash,
+                    "kind": "token_budget", "error": e.to_string()}),
+                );
                 return Ok(None);
             }
             Err(e) => {
-                self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
-                    "kind": "error", "error": e.to_string()}));
+                self.trace.event(
+                    "call_error",
+                    json!({"role": role, "node": node, "prompt_hash": hash,
+                    "kind": "error", "error": e.to_string()}),
+                );
                 return Err(StopCause::Error(format!("{role} call at node {node}: {e}")));
             }
         };
         if g.stop == StopReason::Context {
-            self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
-                "kind": "context", "error": "the model's context is full", "so_far": g.text}));
+            self.trace.event(
+                "call_error",
+                json!({"role": role, "node": node, "prompt_hash": hash,
+                "kind": "context", "error": "the model's context is full", "so_far": g.text}),
+            );
             return Err(StopCause::Error(format!(
                 "{role} call at node {node}: the model's context filled before the answer was complete"
             )));
@@ -269,12 +284,7 @@ impl Run<'_> {
             // `done` before any step would end a goal with nothing done; it is offered once a child
             // has been accepted (or when nothing else can be written).
             let allow_done = accepted > 0 || (!allow_subgoal && actions.is_empty());
-            let dg = DecomposeGrammar {
-                actions,
-                subgoal_chars: self.cfg.subgoal_chars,
-                allow_subgoal,
-                allow_done,
-            };
+            let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done };
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
             let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
@@ -379,8 +389,11 @@ impl Run<'_> {
         if self.cfg.symbolic_check {
             if let Some(f) = self.world()?.why_not(a) {
                 self.stats.symbolic_rejections += 1;
-                self.trace.event("symbolic_check", json!({"node": child, "action": a.to_string(),
-                    "kind": f.kind.name(), "message": f.message}));
+                self.trace.event(
+                    "symbolic_check",
+                    json!({"node": child, "action": a.to_string(),
+                    "kind": f.kind.name(), "message": f.message}),
+                );
                 self.set_status(child, Status::Replanned, format!("environment: {} (symbolic check)", f.message));
                 return Ok(Err(f.message));
             }

@@ -123,7 +123,11 @@ mod tests {
     #[test]
     fn terminate_extends_decompose() {
         let p = Prompter::new("put the apple in the fridge", None);
-        let v = NodeView { observation: "robot: in kitchen".into(), goal: "put the apple in the fridge".into(), ..Default::default() };
+        let v = NodeView {
+            observation: "robot: in kitchen".into(),
+            goal: "put the apple in the fridge".into(),
+            ..Default::default()
+        };
         let (Prompt::Chat(d), Prompt::Chat(t)) = (p.decompose(&v), p.terminate(&v, "subgoal: take the apple")) else {
             panic!("chat prompts expected")
         };

@@ -29,8 +29,9 @@ pub fn read_trace(path: &Path) -> Result<TraceFile, String> {
         if line.trim().is_empty() {
             continue;
         }
-        let v: Value = serde_json::from_str(line)
-            .map_err(|e| format!("{}:{}: not a trace event ({e}); traces are written by `step plan --trace`", path.display(), i + 1))?;
+        let v: Value = serde_json::from_str(line).map_err(|e| {
+            format!("{}:{}: not a trace event ({e}); traces are written by `step plan --trace`", path.display(), i + 1)
+        })?;
         events += 1;
         match v.get("event").and_then(Value::as_str) {
             Some("header") => header = Some(v),
@@ -39,7 +40,8 @@ pub fn read_trace(path: &Path) -> Result<TraceFile, String> {
             _ => {}
         }
     }
-    let header = header.ok_or_else(|| format!("{}: no header event (is it a `step plan --trace` file?)", path.display()))?;
+    let header =
+        header.ok_or_else(|| format!("{}: no header event (is it a `step plan --trace` file?)", path.display()))?;
     Ok(TraceFile { header, calls, end, events })
 }
 
@@ -69,11 +71,7 @@ pub fn compare(recorded: &TraceFile, out: &PlanOutcome) -> Vec<String> {
         }
     }
     if recorded.calls.len() != out.stats.calls.len() {
-        diffs.push(format!(
-            "the trace has {} model calls, the replay {}",
-            recorded.calls.len(),
-            out.stats.calls.len()
-        ));
+        diffs.push(format!("the trace has {} model calls, the replay {}", recorded.calls.len(), out.stats.calls.len()));
     }
     match &recorded.end {
         None => diffs.push("the trace has no end event (the run was killed); calls up to it were compared".into()),

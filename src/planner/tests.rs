@@ -25,9 +25,12 @@ fn prompt_text(p: &Prompt) -> String {
     match p {
         Prompt::Text(t) => t.clone(),
         // The system message is the same for every call (and its examples would match the checks).
-        Prompt::Chat(ms) => {
-            ms.iter().filter(|m| m.role != "system").map(|m| format!("<{}>{}", m.role, m.content)).collect::<Vec<_>>().join("\n")
-        }
+        Prompt::Chat(ms) => ms
+            .iter()
+            .filter(|m| m.role != "system")
+            .map(|m| format!("<{}>{}", m.role, m.content))
+            .collect::<Vec<_>>()
+            .join("\n"),
     }
 }
 
@@ -37,7 +40,11 @@ impl Generate for Scripted {
         self.grammars.push(grammar.unwrap_or_default().to_string());
         let text = match self.answers.pop_front() {
             Some(a) => a?,
-            None => panic!("the script ran out at call {}; last prompt:\n{}", self.prompts.len(), self.prompts.last().unwrap()),
+            None => panic!(
+                "the script ran out at call {}; last prompt:\n{}",
+                self.prompts.len(),
+                self.prompts.last().unwrap()
+            ),
         };
         Ok(Generation {
             text: text.clone(),
@@ -133,7 +140,13 @@ fn each_replan_cause_rejects_the_child_and_the_parent_proposes_again_with_the_re
     for cause in ["affordance", "congruence", "environment"] {
         let verdict = format!("replan: {cause}: the fridge is closed");
         let (out, m) = run(
-            &["subgoal: put the apple away", &verdict, &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+            &[
+                "subgoal: put the apple away",
+                &verdict,
+                &format!("action: {WALK_APPLE}"),
+                &format!("execute: {WALK_APPLE}"),
+                "done",
+            ],
             &cfg(),
         );
         assert_eq!(out.stop, StopCause::Done);
@@ -153,7 +166,13 @@ fn a_failed_execution_makes_the_parent_replan_with_the_executors_message() {
     // Without the symbolic check and with a format grammar, a doomed GRAB reaches the executor.
     let c = PlannerConfig { symbolic_check: false, strength: Strength::Format, ..cfg() };
     let (out, m) = run(
-        &[&format!("action: {GRAB_APPLE}"), &format!("execute: {GRAB_APPLE}"), &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+        &[
+            &format!("action: {GRAB_APPLE}"),
+            &format!("execute: {GRAB_APPLE}"),
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "done",
+        ],
         &c,
     );
     assert_eq!(out.tree.node(1).status, Status::Failed);
@@ -168,7 +187,13 @@ fn a_failed_execution_makes_the_parent_replan_with_the_executors_message() {
 fn the_symbolic_check_turns_a_doomed_execute_into_a_replan_without_executing() {
     let c = PlannerConfig { strength: Strength::Format, ..cfg() };
     let (out, m) = run(
-        &[&format!("action: {GRAB_APPLE}"), &format!("execute: {GRAB_APPLE}"), &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+        &[
+            &format!("action: {GRAB_APPLE}"),
+            &format!("execute: {GRAB_APPLE}"),
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "done",
+        ],
         &c,
     );
     assert_eq!(out.tree.node(1).status, Status::Replanned);
@@ -201,7 +226,10 @@ fn every_budget_ends_the_loop_and_is_named() {
     let sim = || SimEnv::new(World::demo(), vec![]);
     let b = Budgets::default();
     // LLM calls: the model replans forever.
-    let c = PlannerConfig { budgets: Budgets { max_llm_calls: 5, max_replans: 100, max_children: 100, ..b.clone() }, ..cfg() };
+    let c = PlannerConfig {
+        budgets: Budgets { max_llm_calls: 5, max_replans: 100, max_children: 100, ..b.clone() },
+        ..cfg()
+    };
     let (out, _) = run_owned(&always(&["subgoal: x", "replan: congruence: no"], 100), &c, &mut sim());
     assert_eq!(out.stop, StopCause::Budget("llm_calls"));
     assert_eq!(out.stats.llm_calls, 5);
@@ -216,13 +244,23 @@ fn every_budget_ends_the_loop_and_is_named() {
     // Children per node (a dry run: every action is ok, and the model never says done).
     let walk = format!("action: {WALK_APPLE}");
     let exec = format!("execute: {WALK_APPLE}");
-    let c = PlannerConfig { budgets: Budgets { max_children: 3, ..b.clone() }, strength: Strength::Format, symbolic_check: false, ..cfg() };
+    let c = PlannerConfig {
+        budgets: Budgets { max_children: 3, ..b.clone() },
+        strength: Strength::Format,
+        symbolic_check: false,
+        ..cfg()
+    };
     let (out, _) = run_owned(&always(&[&walk, &exec], 100), &c, &mut DryRunEnv::new(World::demo(), vec![]));
     assert_eq!(out.stop, StopCause::Budget("children"));
     assert_eq!(out.executed.len(), 3);
 
     // Executed actions.
-    let c = PlannerConfig { budgets: Budgets { max_actions: 2, ..b.clone() }, strength: Strength::Format, symbolic_check: false, ..cfg() };
+    let c = PlannerConfig {
+        budgets: Budgets { max_actions: 2, ..b.clone() },
+        strength: Strength::Format,
+        symbolic_check: false,
+        ..cfg()
+    };
     let (out, _) = run_owned(&always(&[&walk, &exec], 100), &c, &mut DryRunEnv::new(World::demo(), vec![]));
     assert_eq!(out.stop, StopCause::Budget("actions"));
     assert_eq!(out.executed.len(), 2);
@@ -267,7 +305,14 @@ fn the_depth_budget_shapes_the_grammars() {
     // max_depth 2: a subgoal of the root may not be decomposed below depth 2... its children are actions.
     let c = PlannerConfig { budgets: Budgets { max_depth: 2, ..Budgets::default() }, ..cfg() };
     let (_, m) = run(
-        &["subgoal: take the apple", "decompose", &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done", "done"],
+        &[
+            "subgoal: take the apple",
+            "decompose",
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "done",
+            "done",
+        ],
         &c,
     );
     assert!(m.grammars[0].contains("subgoal: ") && m.grammars[1].contains("\"decompose\""));
@@ -321,7 +366,10 @@ fn the_ablations_change_only_the_context() {
     let c = PlannerConfig { kind: PlannerKind::NoSubgoalTree, ..cfg() };
     let (out, m) = run(&[&walk, &exec, "done"], &c);
     assert!(!m.grammars[0].contains("subgoal: "));
-    assert!(m.prompts[2].contains("Goal: put the apple in the fridge") && m.prompts[2].contains(&format!("Actions so far: {WALK_APPLE}")));
+    assert!(
+        m.prompts[2].contains("Goal: put the apple in the fridge")
+            && m.prompts[2].contains(&format!("Actions so far: {WALK_APPLE}"))
+    );
     assert_eq!(out.stop, StopCause::Done);
 }
 
@@ -349,7 +397,17 @@ fn a_grammar_violation_is_an_error_not_a_guess() {
 
 #[test]
 fn the_tree_exports_to_json_and_dot() {
-    let (out, _) = run(&["subgoal: take the apple", "decompose", &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done", "done"], &cfg());
+    let (out, _) = run(
+        &[
+            "subgoal: take the apple",
+            "decompose",
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "done",
+            "done",
+        ],
+        &cfg(),
+    );
     let j = out.tree.to_json();
     assert_eq!(j["nodes"].as_array().unwrap().len(), 3);
     assert_eq!(j["nodes"][2]["status"]["status"], "executed");

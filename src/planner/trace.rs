@@ -24,7 +24,14 @@ impl TraceWriter {
     /// A trace file at `path` (created or truncated).
     pub fn create(path: &Path) -> std::io::Result<TraceWriter> {
         let f = File::create(path)?;
-        Ok(TraceWriter { out: Some((path.to_path_buf(), BufWriter::new(f))), start: Instant::now(), error: None, events: 0, meta: Value::Null, echo: None })
+        Ok(TraceWriter {
+            out: Some((path.to_path_buf(), BufWriter::new(f))),
+            start: Instant::now(),
+            error: None,
+            events: 0,
+            meta: Value::Null,
+            echo: None,
+        })
     }
 
     /// A trace that writes nothing.
