@@ -13,6 +13,7 @@
 //! - [`grammar`]: Lark grammars built from the embodiment and the scene.
 //! - [`scene_grammar`]: grammars over a particular scene (the demo kitchen's), where `world` and
 //!   `grammar` meet.
+//! - [`planner`]: the STEP planner: subgoal tree, decomposition and termination, closed loop.
 //! - [`llm`]: the local runtime: GGUF loading, tokenizer and chat template from the GGUF, forward pass,
 //!   sampling, grammar-constrained decoding, prompt-prefix reuse.
 //! - [`bench`]: whole-pipeline measurements behind `step bench` (JSON).
@@ -24,6 +25,7 @@ pub mod cli;
 pub mod eval;
 pub mod grammar;
 pub mod llm;
+pub mod planner;
 pub mod program;
 pub mod scene_grammar;
 pub mod world;

@@ -13,6 +13,7 @@ pub mod args;
 pub mod bench;
 pub mod eval;
 pub mod generate;
+pub mod plan;
 pub mod sim;
 
 #[derive(Parser, Debug)]
@@ -33,6 +34,10 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Plan a task with the STEP subgoal tree on the local model, closed-loop on the world (the main job).
+    Plan(plan::PlanArgs),
+    /// Re-run a `step plan --trace` file with the same model and settings; check it is identical.
+    Replay(plan::ReplayArgs),
     /// Generate text from a prompt with the local model, optionally under a Lark grammar.
     Generate(generate::GenerateArgs),
     /// Benchmarks that print JSON: `step bench llm`.
@@ -62,6 +67,8 @@ pub const EXIT_TASK_FAILED: u8 = 3;
 
 fn run(command: Command) -> anyhow::Result<ExitCode> {
     match command {
+        Command::Plan(a) => plan::run(&a).map(|()| ExitCode::SUCCESS),
+        Command::Replay(a) => plan::replay(&a).map(|()| ExitCode::SUCCESS),
         Command::Generate(a) => generate::run(&a).map(|()| ExitCode::SUCCESS),
         Command::Bench(a) => bench::run(&a).map(|()| ExitCode::SUCCESS),
         Command::Sim(a) => sim::run(a),

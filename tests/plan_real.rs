@@ -1,0 +1,49 @@
+//! `step plan` with the real default model on the demo scene, briefly (a few model calls): the loop
+//! ends on a named budget or the model's `done`, never on an error, every output parsed, and the
+//! trace is complete. Skips with a note when the model is not installed, unless STEP_REQUIRE_MODELS=1.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use serde_json::Value;
+
+fn smollm2() -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models/SmolLM2-135M-Instruct.Q4_1.gguf");
+    if p.exists() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var("STEP_REQUIRE_MODELS").map_or(true, |v| v != "1"),
+        "{} is missing and STEP_REQUIRE_MODELS=1: run models/install.sh",
+        p.display()
+    );
+    eprintln!("skipped: {} not installed (models/install.sh)", p.display());
+    None
+}
+
+#[test]
+fn step_plan_on_the_demo_scene_ends_cleanly_with_a_complete_trace() {
+    let Some(model) = smollm2() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("plan.jsonl");
+    let out = Command::new(env!("CARGO_BIN_EXE_step"))
+        .args(["plan", "put the apple in the fridge", "--max-llm-calls", "4", "--json", "--quiet", "--model"])
+        .arg(&model)
+        .arg("--trace")
+        .arg(&trace)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stop = v["stop"]["stop"].as_str().unwrap();
+    assert!(stop == "done" || stop == "budget", "{}", v["stop"]);
+    assert!(v["stats"]["llm_calls"].as_u64().unwrap() <= 4);
+    let events: Vec<Value> =
+        std::fs::read_to_string(&trace).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(events.first().unwrap()["event"], "header");
+    assert_eq!(events.last().unwrap()["event"], "end");
+    let calls = events.iter().filter(|e| e["event"] == "call").count() as u64;
+    // Calls that ended on the token limit are counted but logged as call_error events.
+    assert!(calls <= v["stats"]["llm_calls"].as_u64().unwrap());
+}
