@@ -20,7 +20,7 @@ use crate::llm::sample::Sampling;
 use crate::planner::replay::{compare, read_trace};
 use crate::planner::tree::write_dot;
 use crate::planner::{
-    parse_strength, plan, Budgets, DryRunEnv, Env, PlanOutcome, PlanRequest, PlannerConfig, PlannerKind, SimEnv,
+    plan, Budgets, DryRunEnv, Env, PlanOutcome, PlanRequest, PlannerConfig, PlannerKind, SimEnv,
     StopCause, TraceWriter,
 };
 use crate::world::World;
@@ -214,7 +214,7 @@ fn config(args: &PlanArgs) -> anyhow::Result<PlannerConfig> {
     }
     let mut cfg = PlannerConfig {
         kind,
-        strength: parse_strength(&args.grammar).map_err(|e| anyhow!(e))?,
+        strength: args.grammar.parse().map_err(|e: crate::grammar::UnknownStrength| anyhow!(e))?,
         budgets: Budgets {
             max_depth: args.max_depth,
             max_children: args.max_children,

@@ -10,7 +10,6 @@
 //! [`plan`] is the one entry point for every planner kind.
 
 pub mod env;
-mod grammar_shim;
 pub mod planner;
 pub mod prompt;
 pub mod replay;
@@ -32,15 +31,7 @@ pub use planner::ContextMode;
 pub use trace::TraceWriter;
 pub use tree::{NodeId, Status, SubgoalTree, TreeNode};
 
-// TODO(grammar): replaced by `pub use crate::grammar::Strength` when helper C's branch is merged.
-/// Which actions a grammar may write (issue 7's three strengths).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Strength {
-    Format,
-    Typed,
-    Feasible,
-}
+pub use crate::grammar::Strength;
 
 /// Which planner runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -313,7 +304,7 @@ impl PlannerConfig {
             c.kind = k.parse()?;
         }
         if let Some(s) = v.get("strength").and_then(Value::as_str) {
-            c.strength = parse_strength(s)?;
+            c.strength = s.parse().map_err(|e: crate::grammar::UnknownStrength| e.to_string())?;
         }
         if let Some(b) = v.get("budgets") {
             let d = Budgets::default();
@@ -358,17 +349,6 @@ impl PlannerConfig {
             c.reason_chars = n;
         }
         Ok(c)
-    }
-}
-
-// TODO(grammar): Strength's FromStr comes with helper C's grammar module.
-/// `format|typed|feasible`.
-pub fn parse_strength(s: &str) -> Result<Strength, String> {
-    match s {
-        "format" => Ok(Strength::Format),
-        "typed" => Ok(Strength::Typed),
-        "feasible" => Ok(Strength::Feasible),
-        _ => Err(format!("unknown grammar strength '{s}': choose format, typed or feasible")),
     }
 }
 

@@ -15,7 +15,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::env::{Env, Outcome};
-use super::grammar_shim::{ActionSet, DecomposeGrammar, Proposal, Verdict, VerdictGrammar};
+use crate::grammar::{ActionSet, DecomposeGrammar, Proposal, Verdict, VerdictGrammar};
 use super::prompt::{NodeView, Prompter};
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
@@ -293,7 +293,7 @@ impl Run<'_> {
                 rejected = Some("(no answer within the token limit)".into());
                 continue;
             };
-            let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e))?;
+            let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e.to_string()))?;
             let (child_text, child_action) = match &proposal {
                 Proposal::Done => return Ok(End::Complete),
                 Proposal::Subgoal(s) => (s.clone(), None),
@@ -308,7 +308,7 @@ impl Run<'_> {
             // model's choice).
             let vg = match &child_action {
                 Some(a) => VerdictGrammar {
-                    actions: ActionSet::exact(vec![a.clone()]),
+                    actions: ActionSet::Exact(vec![a.clone()]),
                     reason_chars: self.cfg.reason_chars,
                     allow_decompose: false,
                 },
@@ -327,7 +327,7 @@ impl Run<'_> {
                 rejected = Some(format!("{child_text}: no verdict within the token limit"));
                 continue;
             };
-            let verdict = vg.parse(&vtext).map_err(|e| grammar_error("terminate", child, &vtext, &e))?;
+            let verdict = vg.parse(&vtext).map_err(|e| grammar_error("terminate", child, &vtext, &e.to_string()))?;
             self.trace.event("verdict", json!({"node": child, "verdict": vtext}));
             match verdict {
                 Verdict::Replan { cause, reason } => {
