@@ -73,9 +73,8 @@ pub fn bench_prompt(world: &World) -> Prompt {
 pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
     let world = World::demo();
     let prompt = bench_prompt(&world);
-    let lark = crate::grammar::demo_kitchen_grammar()
-        .to_lark()
-        .map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))?;
+    let lark =
+        crate::grammar::demo_kitchen_grammar().to_lark().map_err(|e| crate::llm::LlmError::Grammar(e.to_string()))?;
     let runs = cfg.runs.max(1);
 
     // Grammar compile: a fresh text each time defeats the cache (a trailing comment changes it).
@@ -117,7 +116,7 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     let constrained = median(&mut per_tok_constrained);
     Ok(LlmBenchReport {
         model: engine.path().display().to_string(),
-        threads: candle_core::utils::get_num_threads(),
+        threads: crate::llm::kernels::pool::global().threads(),
         runs,
         load_ms: engine.load_ms(),
         prompt_tokens,
