@@ -117,7 +117,7 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     let constrained = median(&mut per_tok_constrained);
     Ok(LlmBenchReport {
         model: engine.path().display().to_string(),
-        threads: candle_core::utils::get_num_threads(),
+        threads: crate::llm::kernels::pool::global().threads(),
         runs,
         load_ms: engine.load_ms(),
         prompt_tokens,

@@ -1,5 +1,6 @@
 //! `step bench …`: whole-pipeline benchmarks that print JSON (stdout) and a short table (stderr).
 
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 use clap::{Args, Subcommand};
@@ -42,6 +43,14 @@ pub struct LlmArgs {
     pub busy_neighbour: bool,
     #[command(flatten)]
     pub inference: super::args::InferenceArgs,
+    /// Also run llama.cpp's `llama-bench` at this path (built by ../shared/tools/llama-bench.sh) on
+    /// the same file, prompt length, generated tokens and threads, alternating with ours, and print
+    /// the ratios. A measuring stick only.
+    #[arg(long, value_name = "LLAMA_BENCH")]
+    pub compare: Option<PathBuf>,
+    /// Alternating rounds for --compare (each side runs once per round; ratios of the medians).
+    #[arg(long, default_value_t = 3)]
+    pub rounds: usize,
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
@@ -58,6 +67,9 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     a.inference.apply();
     let path = resolve_model(&a.model)?;
     let mut engine = Engine::load_with_slices(&path, &[crate::grammar::TEXT_SLICE.to_string()])?;
+    if let Some(llama) = &a.compare {
+        return compare(a, &mut engine, &path, llama);
+    }
     let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens };
     let neighbours = if a.busy_neighbour { spawn_neighbours()? } else { Vec::new() };
     let report = run_llm_bench(&mut engine, &cfg);
@@ -71,6 +83,86 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     eprintln!("{}", table(&report));
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
+}
+
+/// Ours and llama-bench, alternating, `rounds` times each; prints both sides' medians and the ratios.
+fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyhow::Result<()> {
+    let threads = crate::llm::kernels::pool::global().threads();
+    let cfg = LlmBenchConfig { runs: 1, decode_tokens: a.decode_tokens };
+    let neighbours = if a.busy_neighbour { spawn_neighbours()? } else { Vec::new() };
+    let result = (|| -> anyhow::Result<_> {
+        let (mut ours_p, mut ours_d, mut theirs_p, mut theirs_d) = (vec![], vec![], vec![], vec![]);
+        let mut prompt_tokens = 0;
+        for round in 0..a.rounds.max(1) {
+            let r = run_llm_bench(engine, &cfg)?;
+            prompt_tokens = r.prompt_tokens;
+            let (p, d) = llama_bench(llama, model, threads, r.prompt_tokens, a.decode_tokens)?;
+            eprintln!(
+                "round {round}: ours prefill {:.1} decode {:.1} tok/s | llama.cpp prefill {p:.1} decode {d:.1} tok/s",
+                r.prefill_tok_per_s, r.decode_tok_per_s
+            );
+            ours_p.push(r.prefill_tok_per_s);
+            ours_d.push(r.decode_tok_per_s);
+            theirs_p.push(p);
+            theirs_d.push(d);
+        }
+        Ok((prompt_tokens, median(ours_p), median(ours_d), median(theirs_p), median(theirs_d)))
+    })();
+    for mut c in neighbours {
+        let _ = c.kill();
+        let _ = c.wait();
+    }
+    let (prompt_tokens, op, od, tp, td) = result?;
+    eprintln!(
+        "{} threads, {prompt_tokens}-token prompt, {} generated, medians of {} rounds{}:\n\
+         prefill  ours {op:>8.1}  llama.cpp {tp:>8.1} tok/s  ratio {:.2}x\n\
+         decode   ours {od:>8.1}  llama.cpp {td:>8.1} tok/s  ratio {:.2}x",
+        threads,
+        a.decode_tokens,
+        a.rounds.max(1),
+        if a.busy_neighbour { ", busy neighbour" } else { "" },
+        op / tp.max(1e-9),
+        od / td.max(1e-9),
+    );
+    let json = serde_json::json!({
+        "model": model.display().to_string(), "threads": threads, "prompt_tokens": prompt_tokens,
+        "decode_tokens": a.decode_tokens, "rounds": a.rounds.max(1), "busy_neighbour": a.busy_neighbour,
+        "ours": { "prefill_tok_per_s": op, "decode_tok_per_s": od },
+        "llama_cpp": { "prefill_tok_per_s": tp, "decode_tok_per_s": td },
+        "ratio": { "prefill": op / tp.max(1e-9), "decode": od / td.max(1e-9) },
+    });
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}
+
+/// One llama-bench run (`-r 1`): (prompt tok/s, generation tok/s).
+fn llama_bench(bin: &Path, model: &Path, threads: usize, prompt: usize, gen: usize) -> anyhow::Result<(f64, f64)> {
+    let out = Command::new(bin)
+        .arg("-m")
+        .arg(model)
+        .args(["-t", &threads.to_string(), "-p", &prompt.to_string(), "-n", &gen.to_string()])
+        .args(["-r", "1", "-o", "json"])
+        .stderr(Stdio::null())
+        .output()
+        .map_err(|e| {
+            anyhow::anyhow!("cannot run {}: {e} (build it with ../shared/tools/llama-bench.sh)", bin.display())
+        })?;
+    if !out.status.success() {
+        anyhow::bail!("{} failed ({}); run it by hand to see why", bin.display(), out.status);
+    }
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout)
+        .map_err(|e| anyhow::anyhow!("{} printed no JSON list: {e}", bin.display()))?;
+    let rate = |prefill: bool| {
+        rows.iter().find(|r| (r["n_gen"].as_u64() == Some(0)) == prefill).and_then(|r| r["avg_ts"].as_f64()).ok_or_else(
+            || anyhow::anyhow!("{} reported no {} rate", bin.display(), if prefill { "prompt" } else { "generation" }),
+        )
+    };
+    Ok((rate(true)?, rate(false)?))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// One burning process per core, so our threads always have a competitor.

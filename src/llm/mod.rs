@@ -13,6 +13,7 @@ pub mod constraint;
 pub mod engine;
 pub mod error;
 pub mod gguf;
+pub mod kernels;
 pub mod locate;
 pub mod model;
 pub mod sample;

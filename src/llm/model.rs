@@ -1,19 +1,25 @@
-//! The forward pass: a decoder-only transformer (llama and qwen2 GGUF layouts) over candle's quantised
-//! matmuls, on the CPU.
+//! The forward pass: a decoder-only transformer (llama and qwen2 GGUF layouts) on the CPU, over our
+//! own quantised matrix kernels ([`super::kernels`]) and plain f32 buffers.
 //!
 //! It is ours rather than candle-transformers' `quantized_llama` for one reason: the planner needs to
 //! own the KV cache. Calls share long prompt prefixes, so the cache must be cut back to any length and
 //! extended from there ([`Transformer::truncate`]), and appended in place rather than re-concatenated
 //! every token. Everything else follows the usual flow: embed → (norm → attention → residual →
 //! norm → SwiGLU → residual) × layers → norm → vocabulary projection of the last position.
-
+//!
+//! Speed notes: the weights stay in their GGUF blocks (the token embedding too: rows are dequantised
+//! when looked up); each matrix input is quantised to 8 bits once and shared by the matrices that read
+//! it (q/k/v, gate/up); attention reads the cache directly, each query head from its own kv head,
+//! without copying keys and values per head; all buffers live in a scratch area reused across calls.
+//! candle is used for reading the file only.
 use std::fs::File;
 use std::io::BufReader;
+use std::sync::Arc;
 
-use candle_core::quantized::QMatMul;
-use candle_core::{DType, Device, Module, Tensor};
+use candle_core::Device;
 
 use super::gguf::{Arch, GgufFile};
+use super::kernels::{dot_f32, matmul, matmul_many, pool, Q8Acts, QMatrix, SendPtr};
 use super::{LlmError, Result};
 
 /// Hyper-parameters read from the GGUF metadata (`<arch>.*` keys).
@@ -37,11 +43,7 @@ impl ModelConfig {
     pub fn from_gguf(gguf: &GgufFile) -> Result<Self> {
         let md = gguf.metadata();
         let key = |k: &str| gguf.arch_key(k);
-        let bad = |k: &str, detail: String| LlmError::Metadata {
-            path: gguf.path().to_path_buf(),
-            key: key(k),
-            detail,
-        };
+        let bad = |k: &str, detail: String| LlmError::Metadata { path: gguf.path().to_path_buf(), key: key(k), detail };
         let n_embd = md.get_usize(&key("embedding_length"))?;
         let n_head = md.get_usize(&key("attention.head_count"))?;
         let n_head_kv = md.opt_u32(&key("attention.head_count_kv"))?.map_or(n_head, |n| n as usize);
@@ -86,82 +88,82 @@ impl ModelConfig {
     }
 }
 
-/// One layer's keys and values, preallocated and appended in place; `len` positions are valid.
-#[derive(Debug, Clone)]
+/// One layer's keys and values, position-major (`[pos][n_head_kv * head_dim]`), grown by doubling;
+/// the first `len` positions are valid.
+#[derive(Debug, Clone, Default)]
 struct LayerCache {
-    k: Tensor, // (n_head_kv, capacity, head_dim)
-    v: Tensor,
+    k: Vec<f32>,
+    v: Vec<f32>,
     len: usize,
 }
 
 impl LayerCache {
-    fn new(n_head_kv: usize, head_dim: usize, capacity: usize, dev: &Device) -> Result<Self> {
-        let k = Tensor::zeros((n_head_kv, capacity, head_dim), DType::F32, dev)?;
-        Ok(Self { v: k.zeros_like()?, k, len: 0 })
-    }
-
-    fn capacity(&self) -> usize {
-        self.k.dim(1).unwrap_or(0)
-    }
-
-    /// Appends `k`, `v` of shape (n_head_kv, t, head_dim), growing the buffers by doubling.
-    fn append(&mut self, k: &Tensor, v: &Tensor) -> Result<()> {
-        let t = k.dim(1)?;
-        if self.len + t > self.capacity() {
-            let new_cap = (self.len + t).next_power_of_two().max(2 * self.capacity());
-            let (h, _, d) = self.k.dims3()?;
-            let grow = |old: &Tensor| -> Result<Tensor> {
-                let buf = Tensor::zeros((h, new_cap, d), DType::F32, old.device())?;
-                buf.slice_set(&old.narrow(1, 0, self.len)?.contiguous()?, 1, 0)?;
-                Ok(buf)
-            };
-            self.k = grow(&self.k)?;
-            self.v = grow(&self.v)?;
+    /// Makes room for `n` positions of `width` floats, keeping the valid ones.
+    fn reserve(&mut self, n: usize, width: usize) {
+        if self.k.len() < n * width {
+            let cap = n.next_power_of_two().max(INITIAL_CACHE) * width;
+            self.k.resize(cap, 0.0);
+            self.v.resize(cap, 0.0);
         }
-        self.k.slice_set(&k.contiguous()?, 1, self.len)?;
-        self.v.slice_set(&v.contiguous()?, 1, self.len)?;
-        self.len += t;
-        Ok(())
-    }
-
-    fn keys(&self) -> Result<Tensor> {
-        Ok(self.k.narrow(1, 0, self.len)?)
-    }
-
-    fn values(&self) -> Result<Tensor> {
-        Ok(self.v.narrow(1, 0, self.len)?)
     }
 }
 
 #[derive(Debug, Clone)]
 struct Layer {
-    attn_norm: Tensor,
-    wq: QMatMul,
-    wk: QMatMul,
-    wv: QMatMul,
-    wo: QMatMul,
+    attn_norm: Vec<f32>,
+    wq: QMatrix,
+    wk: QMatrix,
+    wv: QMatrix,
+    wo: QMatrix,
     // qwen2 has biases on the q, k, v projections; llama has none.
-    bq: Option<Tensor>,
-    bk: Option<Tensor>,
-    bv: Option<Tensor>,
-    ffn_norm: Tensor,
-    gate: QMatMul,
-    up: QMatMul,
-    down: QMatMul,
+    bq: Option<Vec<f32>>,
+    bk: Option<Vec<f32>>,
+    bv: Option<Vec<f32>>,
+    ffn_norm: Vec<f32>,
+    gate: QMatrix,
+    up: QMatrix,
+    down: QMatrix,
     cache: LayerCache,
+}
+
+/// Buffers of one forward call, kept between calls so that decoding allocates nothing but the logits.
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    x: Vec<f32>,
+    h: Vec<f32>,
+    q: Vec<f32>,
+    k: Vec<f32>,
+    v: Vec<f32>,
+    att: Vec<f32>,
+    o: Vec<f32>,
+    g: Vec<f32>,
+    u: Vec<f32>,
+    scores: Vec<f32>,
+    rope: Vec<f32>,
+    q8: Q8Acts,
+}
+
+/// Sets `v` to `n` elements (contents unspecified), allocating only to grow.
+fn fit(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
+    if v.len() < n {
+        v.resize(n, 0.0);
+    }
+    &mut v[..n]
 }
 
 /// A loaded model and its KV cache: one sequence at a time, the planner's case.
 #[derive(Debug, Clone)]
 pub struct Transformer {
     cfg: ModelConfig,
-    embd: Tensor, // (n_vocab, n_embd), dequantised once: row look-ups need plain floats
+    /// (n_vocab, n_embd) in the file's encoding; rows are dequantised on look-up.
+    embd: Arc<QMatrix>,
     layers: Vec<Layer>,
-    out_norm: Tensor,
-    output: QMatMul,
-    cos: Tensor,
-    sin: Tensor,
-    device: Device,
+    out_norm: Vec<f32>,
+    /// The vocabulary projection: the embedding itself when tied (SmolLM2).
+    output: Arc<QMatrix>,
+    /// Rotary inverse frequencies, one per pair of head dimensions.
+    inv_freq: Vec<f32>,
+    scratch: Scratch,
 }
 
 /// Initial KV capacity in positions; the cache doubles when a prompt needs more.
@@ -174,50 +176,48 @@ impl Transformer {
         let dev = Device::Cpu;
         let mut reader = gguf.reader()?;
         let reader = &mut reader;
-        let tensor = |reader: &mut BufReader<File>, name: &str| gguf.tensor(reader, name, &dev);
-        let plain = |reader: &mut BufReader<File>, name: &str| -> Result<Tensor> {
-            Ok(tensor(reader, name)?.dequantize(&dev)?)
+        let matrix = |reader: &mut BufReader<File>, name: &str| -> Result<QMatrix> {
+            QMatrix::from_qtensor(&gguf.tensor(reader, name, &dev)?)
         };
-        let optional = |reader: &mut BufReader<File>, name: &str| -> Result<Option<Tensor>> {
+        let plain = |reader: &mut BufReader<File>, name: &str| -> Result<Vec<f32>> {
+            Ok(gguf.tensor(reader, name, &dev)?.dequantize(&dev)?.flatten_all()?.to_vec1::<f32>()?)
+        };
+        let optional = |reader: &mut BufReader<File>, name: &str| -> Result<Option<Vec<f32>>> {
             if gguf.has_tensor(name) {
                 plain(reader, name).map(Some)
             } else {
                 Ok(None)
             }
         };
-        let embd_q = tensor(reader, "token_embd.weight")?;
-        let embd = embd_q.dequantize(&dev)?;
+        let embd = Arc::new(matrix(reader, "token_embd.weight")?);
         // Tied embeddings (SmolLM2): no output.weight, the embedding matrix projects to the vocabulary.
-        let output = if gguf.has_tensor("output.weight") {
-            QMatMul::from_qtensor(tensor(reader, "output.weight")?)?
-        } else {
-            QMatMul::from_qtensor(embd_q)?
-        };
+        let output =
+            if gguf.has_tensor("output.weight") { Arc::new(matrix(reader, "output.weight")?) } else { embd.clone() };
         let mut layers = Vec::with_capacity(cfg.n_layer);
         for i in 0..cfg.n_layer {
             let n = |s: &str| format!("blk.{i}.{s}");
-            let q = |reader: &mut BufReader<File>, s: &str| -> Result<QMatMul> {
-                Ok(QMatMul::from_qtensor(tensor(reader, &n(s))?)?)
-            };
             layers.push(Layer {
                 attn_norm: plain(reader, &n("attn_norm.weight"))?,
-                wq: q(reader, "attn_q.weight")?,
-                wk: q(reader, "attn_k.weight")?,
-                wv: q(reader, "attn_v.weight")?,
-                wo: q(reader, "attn_output.weight")?,
+                wq: matrix(reader, &n("attn_q.weight"))?,
+                wk: matrix(reader, &n("attn_k.weight"))?,
+                wv: matrix(reader, &n("attn_v.weight"))?,
+                wo: matrix(reader, &n("attn_output.weight"))?,
                 bq: optional(reader, &n("attn_q.bias"))?,
                 bk: optional(reader, &n("attn_k.bias"))?,
                 bv: optional(reader, &n("attn_v.bias"))?,
                 ffn_norm: plain(reader, &n("ffn_norm.weight"))?,
-                gate: q(reader, "ffn_gate.weight")?,
-                up: q(reader, "ffn_up.weight")?,
-                down: q(reader, "ffn_down.weight")?,
-                cache: LayerCache::new(cfg.n_head_kv, cfg.head_dim, INITIAL_CACHE, &dev)?,
+                gate: matrix(reader, &n("ffn_gate.weight"))?,
+                up: matrix(reader, &n("ffn_up.weight"))?,
+                down: matrix(reader, &n("ffn_down.weight"))?,
+                cache: LayerCache::default(),
             });
         }
         let out_norm = plain(reader, "output_norm.weight")?;
-        let (cos, sin) = rope_tables(cfg.head_dim, cfg.rope_base, cfg.context_length, &dev)?;
-        Ok(Self { cfg, embd, layers, out_norm, output, cos, sin, device: dev })
+        let hd = cfg.head_dim;
+        let inv_freq = (0..hd).step_by(2).map(|i| 1.0 / cfg.rope_base.powf(i as f32 / hd as f32)).collect();
+        // Start the worker threads now rather than inside the first timed call.
+        pool::global();
+        Ok(Self { cfg, embd, layers, out_norm, output, inv_freq, scratch: Scratch::default() })
     }
 
     pub fn config(&self) -> &ModelConfig {
@@ -256,107 +256,158 @@ impl Transformer {
                 self.cfg.n_vocab
             )));
         }
-        let ids = Tensor::new(tokens, &self.device)?;
-        let mut x = self.embd.index_select(&ids, 0)?; // (t, n_embd)
-        let cos = self.cos.narrow(0, pos, t)?;
-        let sin = self.sin.narrow(0, pos, t)?;
-        let mask = if t > 1 { Some(causal_mask(t, pos, &self.device)?) } else { None };
-        let cfg = self.cfg.clone();
+        let cfg = &self.cfg;
+        let d = cfg.n_embd;
+        let eps = cfg.rms_eps as f32;
+        let s = &mut self.scratch;
+        // x and h are passed beside the scratch area, so they leave it for the call.
+        let (mut x_buf, mut h_buf) = (std::mem::take(&mut s.x), std::mem::take(&mut s.h));
+        let x = fit(&mut x_buf, t * d);
+        for (row, &id) in x.chunks_exact_mut(d).zip(tokens) {
+            self.embd.dequantize_row(id as usize, row);
+        }
+        rope_table(&self.inv_freq, pos, t, &mut s.rope);
         for layer in &mut self.layers {
-            let h = candle_nn::ops::rms_norm(&x, &layer.attn_norm, cfg.rms_eps as f32)?;
-            let a = layer.attention(&h, &cos, &sin, mask.as_ref(), &cfg)?;
-            x = (x + a)?;
-            let h = candle_nn::ops::rms_norm(&x, &layer.ffn_norm, cfg.rms_eps as f32)?;
-            let g = candle_nn::ops::silu(&layer.gate.forward(&h)?)?;
-            let u = layer.up.forward(&h)?;
-            x = (x + layer.down.forward(&(g * u)?)?)?;
+            layer.cache.reserve(pos + t, cfg.n_head_kv * cfg.head_dim);
+            layer.cache.len = pos;
+            let h = fit(&mut h_buf, t * d);
+            rms_norm(x, &layer.attn_norm, eps, h);
+            layer.attention(h, t, cfg, s);
+            add(x, &s.o[..t * d]);
+            rms_norm(x, &layer.ffn_norm, eps, h);
+            let (g, u) = (fit(&mut s.g, t * cfg.n_ff), fit(&mut s.u, t * cfg.n_ff));
+            s.q8.quantize(h, t, d);
+            matmul_many(&[(&layer.gate, &mut *g), (&layer.up, &mut *u)], &s.q8, h, t);
+            for (g, u) in g.iter_mut().zip(u.iter()) {
+                *g = *g / (1.0 + (-*g).exp()) * u;
+            }
+            let o = fit(&mut s.o, t * d);
+            matmul(&layer.down, g, t, &mut s.q8, o);
+            add(x, o);
         }
         // Only the last position's logits are ever used: project that row alone.
-        let last = x.narrow(0, t - 1, 1)?;
-        let last = candle_nn::ops::rms_norm(&last, &self.out_norm, cfg.rms_eps as f32)?;
-        let logits = self.output.forward(&last)?.squeeze(0)?;
-        Ok(logits.to_vec1::<f32>()?)
+        let last = &x[(t - 1) * d..];
+        let h = fit(&mut h_buf, d);
+        rms_norm(last, &self.out_norm, eps, h);
+        let mut logits = vec![0f32; cfg.n_vocab];
+        matmul(&self.output, h, 1, &mut s.q8, &mut logits);
+        (s.x, s.h) = (x_buf, h_buf);
+        Ok(logits)
     }
 }
 
 impl Layer {
-    /// Grouped-query attention over the cache plus the `t` new positions of `h` (t, n_embd).
-    fn attention(
-        &mut self,
-        h: &Tensor,
-        cos: &Tensor,
-        sin: &Tensor,
-        mask: Option<&Tensor>,
-        cfg: &ModelConfig,
-    ) -> Result<Tensor> {
-        let t = h.dim(0)?;
+    /// Attention for the `t` new positions in `h` (t × n_embd) over the cache, output projection
+    /// included: leaves `scratch.o` (t × n_embd). Appends the new keys and values to the cache.
+    fn attention(&mut self, h: &[f32], t: usize, cfg: &ModelConfig, s: &mut Scratch) {
         let (nh, nkv, hd) = (cfg.n_head, cfg.n_head_kv, cfg.head_dim);
-        let proj = |w: &QMatMul, b: &Option<Tensor>| -> Result<Tensor> {
-            let y = w.forward(h)?;
-            Ok(match b {
-                Some(b) => y.broadcast_add(b)?,
-                None => y,
-            })
-        };
-        // (t, heads*hd) → (1, heads, t, hd), the layout the rope kernels take.
-        let heads = |y: Tensor, n: usize| -> Result<Tensor> {
-            Ok(y.reshape((1, t, n, hd))?.transpose(1, 2)?.contiguous()?)
-        };
-        let q = heads(proj(&self.wq, &self.bq)?, nh)?;
-        let k = heads(proj(&self.wk, &self.bk)?, nkv)?;
-        let v = heads(proj(&self.wv, &self.bv)?, nkv)?;
+        let kvw = nkv * hd;
+        let pos = self.cache.len;
+        let (q, k, v) = (fit(&mut s.q, t * nh * hd), fit(&mut s.k, t * kvw), fit(&mut s.v, t * kvw));
+        s.q8.quantize(h, t, cfg.n_embd);
+        matmul_many(&[(&self.wq, &mut *q), (&self.wk, &mut *k), (&self.wv, &mut *v)], &s.q8, h, t);
+        for (y, b) in [(&mut *q, &self.bq), (&mut *k, &self.bk), (&mut *v, &self.bv)] {
+            if let Some(b) = b {
+                y.chunks_exact_mut(b.len()).for_each(|row| add(row, b));
+            }
+        }
         // llama.cpp stores llama's q/k rows for interleaved (GPT-J style) rotation and qwen2's for
         // the half-split (NeoX) one.
-        let (q, k) = match cfg.arch {
-            Arch::Llama => {
-                (candle_nn::rotary_emb::rope_i(&q, cos, sin)?, candle_nn::rotary_emb::rope_i(&k, cos, sin)?)
-            }
-            Arch::Qwen2 => {
-                (candle_nn::rotary_emb::rope(&q, cos, sin)?, candle_nn::rotary_emb::rope(&k, cos, sin)?)
-            }
-        };
-        self.cache.append(&k.squeeze(0)?, &v.squeeze(0)?)?;
-        let keys = self.cache.keys()?; // (nkv, kv_len, hd)
-        let values = self.cache.values()?;
-        // Grouped-query attention: each kv head serves `group` consecutive query heads.
+        let interleaved = cfg.arch == Arch::Llama;
+        for i in 0..t {
+            let cs = &s.rope[i * hd..(i + 1) * hd];
+            q[i * nh * hd..(i + 1) * nh * hd].chunks_exact_mut(hd).for_each(|x| rope(x, cs, interleaved));
+            k[i * kvw..(i + 1) * kvw].chunks_exact_mut(hd).for_each(|x| rope(x, cs, interleaved));
+        }
+        self.cache.k[pos * kvw..(pos + t) * kvw].copy_from_slice(k);
+        self.cache.v[pos * kvw..(pos + t) * kvw].copy_from_slice(v);
+        self.cache.len = pos + t;
+
+        // One task per (head, block of queries); each query head reads its kv head in place.
+        let kv_len = pos + t;
         let group = nh / nkv;
-        let rep = |x: Tensor| -> Result<Tensor> {
-            let (h, l, d) = x.dims3()?;
-            Ok(x.unsqueeze(1)?.expand((h, group, l, d))?.reshape((h * group, l, d))?)
+        let qblock = 16;
+        let qblocks = t.div_ceil(qblock);
+        let n_tasks = nh * qblocks;
+        let scores = SendPtr(fit(&mut s.scores, n_tasks * kv_len).as_mut_ptr());
+        let att = fit(&mut s.att, t * nh * hd);
+        att.fill(0.0);
+        let out = SendPtr(att.as_mut_ptr());
+        let (keys, values, q) = (&self.cache.k[..kv_len * kvw], &self.cache.v[..kv_len * kvw], &*q);
+        let scale = 1.0 / (hd as f32).sqrt();
+        let task = |task: usize| {
+            let (head, qb) = (task % nh, task / nh);
+            let kvh = head / group;
+            // SAFETY: each task owns its row of `scores` and the (query, head) slices of `att` it
+            // writes; both buffers outlive the pool job.
+            let sc = unsafe { std::slice::from_raw_parts_mut(scores.get().add(task * kv_len), kv_len) };
+            for i in qb * qblock..((qb + 1) * qblock).min(t) {
+                let qi = &q[(i * nh + head) * hd..][..hd];
+                let seen = pos + i + 1; // causal: keys 0..=pos+i
+                let mut max = f32::NEG_INFINITY;
+                for (j, sj) in sc[..seen].iter_mut().enumerate() {
+                    *sj = dot_f32(qi, &keys[j * kvw + kvh * hd..][..hd]) * scale;
+                    max = max.max(*sj);
+                }
+                let mut sum = 0f32;
+                for sj in &mut sc[..seen] {
+                    *sj = (*sj - max).exp();
+                    sum += *sj;
+                }
+                let y = unsafe { std::slice::from_raw_parts_mut(out.get().add((i * nh + head) * hd), hd) };
+                for (j, &p) in sc[..seen].iter().enumerate() {
+                    let p = p / sum;
+                    for (yo, &vv) in y.iter_mut().zip(&values[j * kvw + kvh * hd..][..hd]) {
+                        *yo += p * vv;
+                    }
+                }
+            }
         };
-        let keys = rep(keys.contiguous()?)?;
-        let values = rep(values.contiguous()?)?;
-        let q = q.squeeze(0)?; // (nh, t, hd)
-        let scale = 1.0 / (hd as f64).sqrt();
-        let att = (q.matmul(&keys.t()?)? * scale)?; // (nh, t, kv_len)
-        let att = match mask {
-            Some(m) => att.broadcast_add(m)?,
-            None => att,
-        };
-        let att = candle_nn::ops::softmax_last_dim(&att)?;
-        let y = att.matmul(&values)?; // (nh, t, hd)
-        let y = y.transpose(0, 1)?.reshape((t, nh * hd))?;
-        Ok(self.wo.forward(&y)?)
+        pool::global().run(n_tasks, &task);
+        let o = fit(&mut s.o, t * cfg.n_embd);
+        matmul(&self.wo, att, t, &mut s.q8, o);
     }
 }
 
-/// cos/sin tables (positions × head_dim/2) for rotary embeddings.
-fn rope_tables(head_dim: usize, base: f32, n_pos: usize, dev: &Device) -> Result<(Tensor, Tensor)> {
-    let inv: Vec<f32> =
-        (0..head_dim).step_by(2).map(|i| 1.0 / base.powf(i as f32 / head_dim as f32)).collect();
-    let inv = Tensor::new(inv.as_slice(), dev)?.reshape((1, head_dim / 2))?;
-    let pos = Tensor::arange(0u32, n_pos as u32, dev)?.to_dtype(DType::F32)?.reshape((n_pos, 1))?;
-    let angles = pos.matmul(&inv)?;
-    Ok((angles.cos()?, angles.sin()?))
+/// cos (first half) and sin (second half) of each rotary angle, `head_dim` floats per position.
+fn rope_table(inv_freq: &[f32], pos: usize, t: usize, out: &mut Vec<f32>) {
+    let half = inv_freq.len();
+    let table = fit(out, t * 2 * half);
+    for (i, row) in table.chunks_exact_mut(2 * half).enumerate() {
+        let p = (pos + i) as f32;
+        for (j, &f) in inv_freq.iter().enumerate() {
+            let a = p * f;
+            row[j] = a.cos();
+            row[half + j] = a.sin();
+        }
+    }
 }
 
-/// Additive mask (t, pos + t): query i (absolute pos + i) sees keys 0..=pos + i.
-fn causal_mask(t: usize, pos: usize, dev: &Device) -> Result<Tensor> {
-    let kv = pos + t;
-    let data: Vec<f32> = (0..t)
-        .flat_map(|i| (0..kv).map(move |j| if j <= pos + i { 0.0 } else { f32::NEG_INFINITY }))
-        .collect();
-    Ok(Tensor::from_vec(data, (t, kv), dev)?)
+/// Rotates one head vector by the angles in `cs` (cos then sin halves).
+fn rope(x: &mut [f32], cs: &[f32], interleaved: bool) {
+    let half = x.len() / 2;
+    let (cos, sin) = cs.split_at(half);
+    for j in 0..half {
+        let (a, b) = if interleaved { (2 * j, 2 * j + 1) } else { (j, j + half) };
+        let (x0, x1) = (x[a], x[b]);
+        x[a] = x0 * cos[j] - x1 * sin[j];
+        x[b] = x0 * sin[j] + x1 * cos[j];
+    }
+}
+
+/// RMSNorm of each row of `x` (rows of `w.len()`) into `y`.
+fn rms_norm(x: &[f32], w: &[f32], eps: f32, y: &mut [f32]) {
+    let d = w.len();
+    for (xr, yr) in x.chunks_exact(d).zip(y.chunks_exact_mut(d)) {
+        let r = 1.0 / (dot_f32(xr, xr) / d as f32 + eps).sqrt();
+        for ((yo, &xi), &wi) in yr.iter_mut().zip(xr).zip(w) {
+            *yo = xi * r * wi;
+        }
+    }
+}
+
+fn add(x: &mut [f32], y: &[f32]) {
+    x.iter_mut().zip(y).for_each(|(a, b)| *a += b);
 }
 
 /// Index of the largest logit (ties: the lowest id), the greedy choice.

@@ -1,0 +1,207 @@
+//! AVX2/FMA kernels, used when the CPU reports both features at run time. Each 32-block of weights
+//! is expanded to 32 bytes in element order, multiplied with the activation bytes (`maddubs`, signed
+//! formats through the sign trick), widened to eight i32 lanes with the per-16 scales (`madd`), and
+//! accumulated in f32 with one FMA per block: the same arithmetic, in the same order, as
+//! [`super::scalar`]. Several tokens share each decoded weight block.
+
+use super::{Format, Q8Block};
+
+/// Whether this CPU runs these kernels.
+pub fn available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `NT` dot products of one weight row with `NT` activation rows.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA ([`available`]); `w` must hold `a[k].len()` 32-blocks of `fmt`
+/// (every `a[k]` the same length).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+pub unsafe fn dot<const NT: usize>(fmt: Format, w: &[u8], a: &[&[Q8Block]; NT]) -> [f32; NT] {
+    let nb = a[0].len();
+    debug_assert!(a.iter().all(|r| r.len() == nb));
+    let (bv, bb) = fmt.block();
+    debug_assert!(w.len() >= nb * 32 / bv * bb);
+    let mut st = x86::State::<NT>::new();
+    match fmt {
+        Format::Q4_1 => x86::q4_1(w, a, &mut st),
+        Format::Q5_0 => x86::q5_0(w, a, &mut st),
+        Format::Q8_0 => x86::q8_0(w, a, &mut st),
+        Format::Q4K => x86::q4k(w, a, &mut st),
+        Format::Q6K => x86::q6k(w, a, &mut st),
+    }
+    st.finish()
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+pub unsafe fn dot<const NT: usize>(_: Format, _: &[u8], _: &[&[Q8Block]; NT]) -> [f32; NT] {
+    unreachable!("the AVX2 kernels are only selected on x86_64")
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    //! The helpers are `inline(always)` so that they compile inside `dot`, with its target features.
+    use std::arch::x86_64::*;
+
+    use super::super::{f16, q4k_scale_min, Q8Block};
+
+    pub struct State<const NT: usize> {
+        acc: [__m256; NT],
+        mins: [f32; NT],
+    }
+
+    impl<const NT: usize> State<NT> {
+        #[inline(always)]
+        pub unsafe fn new() -> Self {
+            Self { acc: [_mm256_setzero_ps(); NT], mins: [0.0; NT] }
+        }
+
+        /// Adds weight block `wq` (32 bytes in element order; signed i8, or unsigned with `signed`
+        /// false) times activation block `c` of each token, lanes scaled by the i16s in `scale`, times
+        /// `f * d_activation`; and `min * s_activation` to the min sums.
+        #[inline(always)]
+        unsafe fn add(
+            &mut self,
+            wq: __m256i,
+            signed: bool,
+            scale: __m256i,
+            a: &[&[Q8Block]; NT],
+            c: usize,
+            f: f32,
+            min: Option<f32>,
+        ) {
+            let wabs = if signed { _mm256_sign_epi8(wq, wq) } else { wq };
+            for k in 0..NT {
+                let b = a[k].get_unchecked(c);
+                let av = _mm256_loadu_si256(b.qs.as_ptr() as *const __m256i);
+                let av = if signed { _mm256_sign_epi8(av, wq) } else { av };
+                let lanes = _mm256_madd_epi16(_mm256_maddubs_epi16(wabs, av), scale);
+                self.acc[k] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(lanes), _mm256_set1_ps(f * b.d), self.acc[k]);
+                if let Some(m) = min {
+                    self.mins[k] += m * b.s;
+                }
+            }
+        }
+
+        #[inline(always)]
+        pub unsafe fn finish(self) -> [f32; NT] {
+            let mut out = [0f32; NT];
+            for k in 0..NT {
+                // ((l0+l4)+(l2+l6)) + ((l1+l5)+(l3+l7)), as `reduce_lanes`.
+                let s = _mm_add_ps(_mm256_castps256_ps128(self.acc[k]), _mm256_extractf128_ps::<1>(self.acc[k]));
+                let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+                let s = _mm_add_ss(s, _mm_shuffle_ps::<1>(s, s));
+                // Formats without minimums add 0.0, as the scalar code does.
+                out[k] = _mm_cvtss_f32(s) + self.mins[k];
+            }
+            out
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn ones() -> __m256i {
+        _mm256_set1_epi16(1)
+    }
+
+    /// 16 bytes of nibbles → 32 bytes: low nibbles (elements 0..16), then high nibbles (16..32).
+    #[inline(always)]
+    unsafe fn nibbles(p: *const u8) -> __m256i {
+        let x = _mm_loadu_si128(p as *const __m128i);
+        let m = _mm_set1_epi8(0x0f);
+        _mm256_set_m128i(_mm_and_si128(_mm_srli_epi16::<4>(x), m), _mm_and_si128(x, m))
+    }
+
+    /// 32 bits → 32 bytes, 0xff where the bit is set.
+    #[inline(always)]
+    unsafe fn bits_to_bytes(x: u32) -> __m256i {
+        let shuf = _mm256_set_epi64x(0x0303030303030303, 0x0202020202020202, 0x0101010101010101, 0);
+        let bytes = _mm256_shuffle_epi8(_mm256_set1_epi32(x as i32), shuf);
+        let all_but_own_bit = _mm256_set1_epi64x(0x7fbfdfeff7fbfdfe);
+        _mm256_cmpeq_epi8(_mm256_or_si256(bytes, all_but_own_bit), _mm256_set1_epi64x(-1))
+    }
+
+    #[inline(always)]
+    pub unsafe fn q4_1<const NT: usize>(w: &[u8], a: &[&[Q8Block]; NT], st: &mut State<NT>) {
+        for c in 0..a[0].len() {
+            let p = w.as_ptr().add(c * 20);
+            let (d, m) = (f16(*p, *p.add(1)), f16(*p.add(2), *p.add(3)));
+            st.add(nibbles(p.add(4)), false, ones(), a, c, d, Some(m));
+        }
+    }
+
+    #[inline(always)]
+    pub unsafe fn q5_0<const NT: usize>(w: &[u8], a: &[&[Q8Block]; NT], st: &mut State<NT>) {
+        for c in 0..a[0].len() {
+            let p = w.as_ptr().add(c * 22);
+            let d = f16(*p, *p.add(1));
+            let qh = u32::from_le_bytes([*p.add(2), *p.add(3), *p.add(4), *p.add(5)]);
+            // Without the fifth bit the value is nibble - 16, i.e. the nibble with 0xf0 or-ed in.
+            let high = _mm256_andnot_si256(bits_to_bytes(qh), _mm256_set1_epi8(0xf0u8 as i8));
+            st.add(_mm256_or_si256(nibbles(p.add(6)), high), true, ones(), a, c, d, None);
+        }
+    }
+
+    #[inline(always)]
+    pub unsafe fn q8_0<const NT: usize>(w: &[u8], a: &[&[Q8Block]; NT], st: &mut State<NT>) {
+        for c in 0..a[0].len() {
+            let p = w.as_ptr().add(c * 34);
+            let d = f16(*p, *p.add(1));
+            st.add(_mm256_loadu_si256(p.add(2) as *const __m256i), true, ones(), a, c, d, None);
+        }
+    }
+
+    #[inline(always)]
+    pub unsafe fn q4k<const NT: usize>(w: &[u8], a: &[&[Q8Block]; NT], st: &mut State<NT>) {
+        let m4 = _mm256_set1_epi8(0x0f);
+        for sb in 0..a[0].len() / 8 {
+            let b = std::slice::from_raw_parts(w.as_ptr().add(sb * 144), 144);
+            let (d, dmin) = (f16(b[0], b[1]), f16(b[2], b[3]));
+            for jj in 0..4 {
+                let x = _mm256_loadu_si256(b.as_ptr().add(16 + 32 * jj) as *const __m256i);
+                let halves = [_mm256_and_si256(x, m4), _mm256_and_si256(_mm256_srli_epi16::<4>(x), m4)];
+                for (h, q) in halves.into_iter().enumerate() {
+                    let j = 2 * jj + h;
+                    let (sc, m) = q4k_scale_min(j, &b[4..16]);
+                    st.add(q, false, ones(), a, sb * 8 + j, d * sc as f32, Some(-(dmin * m as f32)));
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    pub unsafe fn q6k<const NT: usize>(w: &[u8], a: &[&[Q8Block]; NT], st: &mut State<NT>) {
+        let m4 = _mm256_set1_epi8(0x0f);
+        let m2 = _mm256_set1_epi8(0x03);
+        let off = _mm256_set1_epi8(32);
+        for sb in 0..a[0].len() / 8 {
+            let b = w.as_ptr().add(sb * 210);
+            let d = f16(*b.add(208), *b.add(209));
+            let scales = b.add(192) as *const i8;
+            for n in 0..2 {
+                let qh = _mm256_loadu_si256(b.add(128 + 32 * n) as *const __m256i);
+                for kk in 0..4 {
+                    let ql = _mm256_loadu_si256(b.add(64 * n + 32 * (kk & 1)) as *const __m256i);
+                    let nib = if kk < 2 {
+                        _mm256_and_si256(ql, m4)
+                    } else {
+                        _mm256_and_si256(_mm256_srli_epi16::<4>(ql), m4)
+                    };
+                    let hi = _mm256_and_si256(_mm256_srl_epi16(qh, _mm_cvtsi32_si128(2 * kk as i32)), m2);
+                    let q = _mm256_sub_epi8(_mm256_or_si256(nib, _mm256_slli_epi16::<4>(hi)), off);
+                    let s0 = *scales.add(8 * n + 2 * kk) as i16;
+                    let s1 = *scales.add(8 * n + 2 * kk + 1) as i16;
+                    let scale = _mm256_set_m128i(_mm_set1_epi16(s1), _mm_set1_epi16(s0));
+                    st.add(q, true, scale, a, sb * 8 + 4 * n + kk, d, None);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,358 @@
+//! Our quantised matrix kernels: the weights stay in their GGUF blocks (Q4_1, Q5_0, Q8_0, Q4_K, Q6_K),
+//! the activations are quantised once per matrix input to 8-bit blocks of 32 ([`Q8Acts`]), and each
+//! output element is an integer dot product per block scaled in f32.
+//!
+//! Two implementations compute exactly the same numbers: a portable scalar one ([`scalar`]) and an
+//! AVX2/FMA one ([`avx2`]) chosen at run time. They agree bit for bit because the integer part is exact
+//! and the float part follows the same order: eight lanes (lane `l` holds elements `4l..4l+4` of each
+//! 32-block), one fused multiply-add per lane and block, a fixed reduction tree, then the blocks'
+//! min terms summed in order. Rows are split across the [`pool`]'s threads; each output element is
+//! computed by one thread, so results do not depend on the thread count.
+
+pub mod avx2;
+pub mod pool;
+pub mod scalar;
+
+use candle_core::quantized::{GgmlDType, QTensor};
+use candle_core::Device;
+
+use super::Result;
+
+/// Values per activation block (and per weight sub-block).
+pub const QK: usize = 32;
+
+/// 32 activations quantised to i8 with one f32 scale; `s` is `d * Σ qs` (for the formats with a
+/// per-block minimum).
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C)]
+pub struct Q8Block {
+    pub d: f32,
+    pub s: f32,
+    pub qs: [i8; QK],
+}
+
+/// `t` rows of activations, each quantised to `cols / 32` blocks.
+#[derive(Clone, Debug, Default)]
+pub struct Q8Acts {
+    pub blocks: Vec<Q8Block>,
+    pub t: usize,
+    pub nb: usize,
+}
+
+impl Q8Acts {
+    /// Quantises `x` (`t` rows of `cols`, cols a multiple of 32) in place of the previous content,
+    /// reusing the allocation.
+    pub fn quantize(&mut self, x: &[f32], t: usize, cols: usize) {
+        debug_assert_eq!(x.len(), t * cols);
+        self.t = t;
+        // No quantised kernel takes a width that is not whole blocks (those matrices are kept as f32).
+        self.nb = if cols % QK == 0 { cols / QK } else { 0 };
+        self.blocks.resize(t * self.nb, Q8Block::default());
+        for (b, xs) in self.blocks.iter_mut().zip(x.chunks_exact(QK)) {
+            *b = quantize_block(xs);
+        }
+    }
+
+    pub fn row(&self, i: usize) -> &[Q8Block] {
+        &self.blocks[i * self.nb..(i + 1) * self.nb]
+    }
+}
+
+fn quantize_block(xs: &[f32]) -> Q8Block {
+    let amax = xs.iter().fold(0f32, |m, x| m.max(x.abs()));
+    let d = amax / 127.0;
+    let id = if d > 0.0 { 1.0 / d } else { 0.0 };
+    let mut qs = [0i8; QK];
+    let mut sum = 0i32;
+    for (q, &x) in qs.iter_mut().zip(xs) {
+        *q = (x * id).round().clamp(-127.0, 127.0) as i8;
+        sum += *q as i32;
+    }
+    Q8Block { d, s: d * sum as f32, qs }
+}
+
+/// The weight formats with integer kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Q4_1,
+    Q5_0,
+    Q8_0,
+    Q4K,
+    Q6K,
+}
+
+impl Format {
+    fn from_ggml(d: GgmlDType) -> Option<Self> {
+        Some(match d {
+            GgmlDType::Q4_1 => Format::Q4_1,
+            GgmlDType::Q5_0 => Format::Q5_0,
+            GgmlDType::Q8_0 => Format::Q8_0,
+            GgmlDType::Q4K => Format::Q4K,
+            GgmlDType::Q6K => Format::Q6K,
+            _ => return None,
+        })
+    }
+
+    /// (values, bytes) per block.
+    pub fn block(self) -> (usize, usize) {
+        match self {
+            Format::Q4_1 => (32, 20),
+            Format::Q5_0 => (32, 22),
+            Format::Q8_0 => (32, 34),
+            Format::Q4K => (256, 144),
+            Format::Q6K => (256, 210),
+        }
+    }
+}
+
+/// How a matrix's rows are stored.
+#[derive(Clone, Debug)]
+enum Storage {
+    /// GGUF blocks, row after row.
+    Quant { fmt: Format, data: Vec<u8>, row_bytes: usize },
+    /// Plain floats, for formats without a kernel (f32/f16 and the rarer quantisations).
+    F32(Vec<f32>),
+}
+
+/// A (rows × cols) weight matrix for `y = W x`, in the file's own encoding where a kernel exists.
+#[derive(Clone, Debug)]
+pub struct QMatrix {
+    rows: usize,
+    cols: usize,
+    storage: Storage,
+}
+
+impl QMatrix {
+    /// Takes a GGUF tensor of shape (rows, cols). Formats without a kernel, or widths that are not
+    /// whole blocks, are dequantised to f32 once.
+    pub fn from_qtensor(t: &QTensor) -> Result<Self> {
+        let (rows, cols) = t.shape().dims2()?;
+        if let Some(fmt) = Format::from_ggml(t.dtype()) {
+            let (bv, bb) = fmt.block();
+            if cols % bv == 0 {
+                let data = t.data()?.into_owned();
+                let row_bytes = cols / bv * bb;
+                debug_assert_eq!(data.len(), rows * row_bytes);
+                return Ok(Self { rows, cols, storage: Storage::Quant { fmt, data, row_bytes } });
+            }
+        }
+        let w = t.dequantize(&Device::Cpu)?.flatten_all()?.to_vec1::<f32>()?;
+        Ok(Self { rows, cols, storage: Storage::F32(w) })
+    }
+
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    pub fn cols(&self) -> usize {
+        self.cols
+    }
+
+    /// The format of the integer kernel used, if any.
+    pub fn format(&self) -> Option<Format> {
+        match &self.storage {
+            Storage::Quant { fmt, .. } => Some(*fmt),
+            Storage::F32(_) => None,
+        }
+    }
+
+    /// Whether this matrix multiplies quantised activations (else it wants the f32 input).
+    pub fn wants_q8(&self) -> bool {
+        self.format().is_some()
+    }
+
+    /// Row `r` dequantised into `out` (length `cols`): the embedding look-up.
+    pub fn dequantize_row(&self, r: usize, out: &mut [f32]) {
+        match &self.storage {
+            Storage::Quant { fmt, data, row_bytes } => {
+                scalar::dequantize_row(*fmt, &data[r * row_bytes..(r + 1) * row_bytes], out)
+            }
+            Storage::F32(w) => out.copy_from_slice(&w[r * self.cols..(r + 1) * self.cols]),
+        }
+    }
+
+    /// Computes output rows `rows` for every token: `y[i * ld + r] = W[r] · x_i`, with x the
+    /// quantised activations `q` (quantised kernels) or the floats `x` (plain storage).
+    ///
+    /// # Safety
+    /// `y` must be valid for writes at every `i * ld + r` (i < t, r in `rows`), and no other thread
+    /// may write those elements at the same time.
+    pub unsafe fn compute_rows(
+        &self,
+        rows: std::ops::Range<usize>,
+        q: &Q8Acts,
+        x: &[f32],
+        y: *mut f32,
+        ld: usize,
+        kernel: Kernel,
+    ) {
+        match &self.storage {
+            Storage::Quant { fmt, data, row_bytes } => {
+                let t = q.t;
+                for r in rows {
+                    let w = &data[r * row_bytes..(r + 1) * row_bytes];
+                    let mut i = 0;
+                    // Four tokens at a time share each decoded weight block.
+                    while i + 4 <= t {
+                        let a = [q.row(i), q.row(i + 1), q.row(i + 2), q.row(i + 3)];
+                        let out = dot::<4>(kernel, *fmt, w, &a);
+                        for (k, v) in out.into_iter().enumerate() {
+                            *y.add((i + k) * ld + r) = v;
+                        }
+                        i += 4;
+                    }
+                    while i < t {
+                        let [v] = dot::<1>(kernel, *fmt, w, &[q.row(i)]);
+                        *y.add(i * ld + r) = v;
+                        i += 1;
+                    }
+                }
+            }
+            Storage::F32(w) => {
+                let t = x.len() / self.cols;
+                for r in rows {
+                    let wr = &w[r * self.cols..(r + 1) * self.cols];
+                    for i in 0..t {
+                        *y.add(i * ld + r) = dot_f32(wr, &x[i * self.cols..(i + 1) * self.cols]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Which implementation runs the dot products.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    Scalar,
+    Avx2,
+}
+
+impl Kernel {
+    /// The fastest implementation this CPU runs (`STEP_KERNEL=scalar` forces the portable one).
+    pub fn detect() -> Kernel {
+        if std::env::var("STEP_KERNEL").is_ok_and(|v| v == "scalar") {
+            return Kernel::Scalar;
+        }
+        if avx2::available() {
+            Kernel::Avx2
+        } else {
+            Kernel::Scalar
+        }
+    }
+}
+
+/// `NT` dot products of one weight row with `NT` activation rows.
+#[inline]
+fn dot<const NT: usize>(kernel: Kernel, fmt: Format, w: &[u8], a: &[&[Q8Block]; NT]) -> [f32; NT] {
+    match kernel {
+        // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
+        Kernel::Avx2 => unsafe { avx2::dot::<NT>(fmt, w, a) },
+        Kernel::Scalar => scalar::dot::<NT>(fmt, w, a),
+    }
+}
+
+/// A float dot product with eight independent partial sums (vectorisable, fixed order).
+pub fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut s = ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7]));
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+/// The final reduction of the eight lanes, in the order the SIMD code adds them.
+#[inline(always)]
+pub(crate) fn reduce_lanes(l: &[f32; 8]) -> f32 {
+    let s = [l[0] + l[4], l[1] + l[5], l[2] + l[6], l[3] + l[7]];
+    (s[0] + s[2]) + (s[1] + s[3])
+}
+
+/// f16 bits → f32 (exact): normal numbers by bit arithmetic, the rest through `half`.
+#[inline(always)]
+pub(crate) fn f16(lo: u8, hi: u8) -> f32 {
+    let h = u16::from_le_bytes([lo, hi]) as u32;
+    let exp = (h >> 10) & 0x1f;
+    if exp == 0 || exp == 31 {
+        return half::f16::from_bits(h as u16).to_f32();
+    }
+    f32::from_bits(((h & 0x8000) << 16) | ((exp + 112) << 23) | ((h & 0x3ff) << 13))
+}
+
+/// Scale and minimum of sub-block `j` (0..8) of a Q4_K block from its 12 packed 6-bit bytes.
+#[inline(always)]
+pub(crate) fn q4k_scale_min(j: usize, s: &[u8]) -> (u8, u8) {
+    if j < 4 {
+        (s[j] & 63, s[j + 4] & 63)
+    } else {
+        ((s[j + 4] & 0xF) | ((s[j - 4] >> 6) << 4), (s[j + 4] >> 4) | ((s[j] >> 6) << 4))
+    }
+}
+
+/// y (t × m.rows) = x (t × m.cols) · mᵀ for up to four matrices sharing one input, rows split across
+/// the pool. `q` must hold `x` quantised when any matrix wants it.
+pub fn matmul_many(mats: &[(&QMatrix, &mut [f32])], q: &Q8Acts, x: &[f32], t: usize) {
+    assert!(mats.len() <= 4, "matmul_many takes at most four matrices");
+    let kernel = kernel();
+    let pool = pool::global();
+    let threads = pool.threads();
+    // Chunks of rows: enough tasks to balance a few threads (and a busy core), few enough to keep
+    // the per-task overhead low. No allocation: task k maps to (matrix, chunk) arithmetically.
+    let mut per = [0usize; 4];
+    let mut first = [0usize; 5];
+    let mut outs = [SendPtr(std::ptr::null_mut()); 4];
+    for (mi, (m, y)) in mats.iter().enumerate() {
+        assert_eq!(y.len(), t * m.rows, "output buffer does not match {t} tokens x {} rows", m.rows);
+        per[mi] = if threads == 1 { m.rows.max(1) } else { (m.rows / (threads * 4)).max(16).div_ceil(8) * 8 };
+        first[mi + 1] = first[mi] + m.rows.div_ceil(per[mi]);
+        outs[mi] = SendPtr(y.as_ptr() as *mut f32);
+    }
+    let n_tasks = first[mats.len()];
+    let run = |k: usize| {
+        let mi = (0..mats.len()).find(|&i| k < first[i + 1]).unwrap_or(0);
+        let m = mats[mi].0;
+        let s = (k - first[mi]) * per[mi];
+        let e = (s + per[mi]).min(m.rows);
+        // SAFETY: tasks cover disjoint row ranges of each output, every (token, row) element of
+        // `outs[mi]` lies inside its slice (checked above), and each task runs exactly once.
+        unsafe { m.compute_rows(s..e, q, x, outs[mi].get(), m.rows, kernel) };
+    };
+    pool.run(n_tasks, &run);
+}
+
+/// One matrix: `y = x · mᵀ` (quantising `x` into `q`).
+pub fn matmul(m: &QMatrix, x: &[f32], t: usize, q: &mut Q8Acts, y: &mut [f32]) {
+    if m.wants_q8() {
+        q.quantize(x, t, m.cols);
+    }
+    matmul_many(&[(m, y)], q, x, t);
+}
+
+#[derive(Clone, Copy)]
+pub(crate) struct SendPtr(pub(crate) *mut f32);
+// SAFETY: used only to write disjoint elements from pool tasks (see `matmul_many`).
+unsafe impl Send for SendPtr {}
+unsafe impl Sync for SendPtr {}
+
+impl SendPtr {
+    // A method (not a field access) so closures capture the whole Sync wrapper.
+    pub(crate) fn get(&self) -> *mut f32 {
+        self.0
+    }
+}
+
+fn kernel() -> Kernel {
+    static K: std::sync::OnceLock<Kernel> = std::sync::OnceLock::new();
+    *K.get_or_init(Kernel::detect)
+}
+
+#[cfg(test)]
+mod tests;

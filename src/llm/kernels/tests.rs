@@ -1,0 +1,140 @@
+//! Each kernel against a dequantise-then-f32 reference (candle's own dequantisation, an independent
+//! implementation) on random data, and the SIMD kernels against the scalar ones, bit for bit.
+
+use candle_core::quantized::{GgmlDType, QTensor};
+use candle_core::{Device, Tensor};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+use super::*;
+
+const FORMATS: [(GgmlDType, Format); 5] = [
+    (GgmlDType::Q4_1, Format::Q4_1),
+    (GgmlDType::Q5_0, Format::Q5_0),
+    (GgmlDType::Q8_0, Format::Q8_0),
+    (GgmlDType::Q4K, Format::Q4K),
+    (GgmlDType::Q6K, Format::Q6K),
+];
+
+fn randn(rng: &mut StdRng, n: usize) -> Vec<f32> {
+    // Uniform with a few large values, like real activations.
+    (0..n).map(|i| rng.random_range(-1.0f32..1.0) * if i % 97 == 0 { 8.0 } else { 1.0 }).collect()
+}
+
+fn quantised(rng: &mut StdRng, dtype: GgmlDType, rows: usize, cols: usize) -> (QMatrix, Vec<f32>) {
+    let w = Tensor::from_vec(randn(rng, rows * cols), (rows, cols), &Device::Cpu).unwrap();
+    let q = QTensor::quantize(&w, dtype).unwrap();
+    let deq = q.dequantize(&Device::Cpu).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    (QMatrix::from_qtensor(&q).unwrap(), deq)
+}
+
+/// The activations as the kernels see them: dequantised from their 8-bit blocks.
+fn dequantised_acts(q: &Q8Acts) -> Vec<f32> {
+    q.blocks.iter().flat_map(|b| b.qs.iter().map(move |&v| b.d * v as f32)).collect()
+}
+
+fn run(m: &QMatrix, q: &Q8Acts, x: &[f32], t: usize, kernel: Kernel) -> Vec<f32> {
+    let mut y = vec![0f32; t * m.rows()];
+    // SAFETY: one thread writes every element of y, which has t * rows elements.
+    unsafe { m.compute_rows(0..m.rows(), q, x, y.as_mut_ptr(), m.rows(), kernel) };
+    y
+}
+
+#[test]
+fn kernels_match_the_dequantised_reference() {
+    let mut rng = StdRng::seed_from_u64(7);
+    let (rows, cols, t) = (19, 512, 6); // t = 6: one four-token tile and two single tokens
+    for (dtype, fmt) in FORMATS {
+        let (m, w) = quantised(&mut rng, dtype, rows, cols);
+        assert_eq!(m.format(), Some(fmt));
+        let x = randn(&mut rng, t * cols);
+        let mut q = Q8Acts::default();
+        q.quantize(&x, t, cols);
+        let xq = dequantised_acts(&q);
+        let y = run(&m, &q, &x, t, Kernel::Scalar);
+        for i in 0..t {
+            for r in 0..rows {
+                let wr = &w[r * cols..(r + 1) * cols];
+                let exact: f64 = wr.iter().zip(&xq[i * cols..]).map(|(&a, &b)| a as f64 * b as f64).sum();
+                let unquantised: f64 = wr.iter().zip(&x[i * cols..]).map(|(&a, &b)| a as f64 * b as f64).sum();
+                let got = y[i * rows + r] as f64;
+                let mag: f64 = wr.iter().zip(&x[i * cols..]).map(|(&a, &b)| (a as f64 * b as f64).abs()).sum();
+                // Against the same quantised inputs only float rounding differs; against the f32
+                // activations the 8-bit rounding adds up to ~1% of the absolute sum.
+                assert!((got - exact).abs() <= 1e-5 * mag, "{fmt:?} row {r} token {i}: {got} vs {exact}");
+                assert!((got - unquantised).abs() <= 1e-2 * mag, "{fmt:?} row {r} token {i}: {got} vs {unquantised}");
+            }
+        }
+    }
+}
+
+#[test]
+fn simd_kernels_equal_the_scalar_ones_bit_for_bit() {
+    if !avx2::available() {
+        eprintln!("skipped: this CPU has no AVX2/FMA");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(11);
+    for (dtype, fmt) in FORMATS {
+        for (cols, t) in [(256, 1), (768, 5), (1024, 9)] {
+            let (m, _) = quantised(&mut rng, dtype, 13, cols);
+            let x = randn(&mut rng, t * cols);
+            let mut q = Q8Acts::default();
+            q.quantize(&x, t, cols);
+            let a = run(&m, &q, &x, t, Kernel::Scalar);
+            let b = run(&m, &q, &x, t, Kernel::Avx2);
+            let same = a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "{fmt:?} cols {cols} t {t}: scalar {a:?}\n avx2 {b:?}");
+        }
+    }
+}
+
+#[test]
+fn row_dequantisation_matches_candle() {
+    let mut rng = StdRng::seed_from_u64(3);
+    for (dtype, fmt) in FORMATS {
+        let (m, w) = quantised(&mut rng, dtype, 5, 512);
+        let mut row = vec![0f32; 512];
+        for r in 0..5 {
+            m.dequantize_row(r, &mut row);
+            for (c, (&a, &b)) in row.iter().zip(&w[r * 512..]).enumerate() {
+                assert!((a - b).abs() <= 1e-6 * (1.0 + b.abs()), "{fmt:?} ({r}, {c}): {a} vs {b}");
+            }
+        }
+    }
+}
+
+#[test]
+fn pooled_matmul_is_the_same_for_any_thread_count_and_plain_formats_work() {
+    let mut rng = StdRng::seed_from_u64(5);
+    let (m, _) = quantised(&mut rng, GgmlDType::Q4_1, 300, 256);
+    let (f, wf) = quantised(&mut rng, GgmlDType::F32, 40, 256);
+    assert_eq!(f.format(), None);
+    let x = randn(&mut rng, 3 * 256);
+    let mut q = Q8Acts::default();
+    q.quantize(&x, 3, 256);
+    let one = run(&m, &q, &x, 3, kernel());
+    let (mut y, mut yf) = (vec![0f32; 3 * 300], vec![0f32; 3 * 40]);
+    matmul_many(&[(&m, &mut y), (&f, &mut yf)], &q, &x, 3);
+    assert_eq!(one, y);
+    for i in 0..3 {
+        for r in 0..40 {
+            let want = dot_f32(&wf[r * 256..(r + 1) * 256], &x[i * 256..(i + 1) * 256]);
+            assert_eq!(yf[i * 40 + r], want);
+        }
+    }
+}
+
+#[test]
+fn activation_blocks_round_trip_within_half_a_step() {
+    let mut rng = StdRng::seed_from_u64(9);
+    let x = randn(&mut rng, 64);
+    let mut q = Q8Acts::default();
+    q.quantize(&x, 2, 32);
+    let back = dequantised_acts(&q);
+    for (b, (a, r)) in q.blocks.iter().zip(x.chunks(32).zip(back.chunks(32))) {
+        let isum: i32 = b.qs.iter().map(|&v| v as i32).sum();
+        assert_eq!(b.s, b.d * isum as f32);
+        assert!(a.iter().zip(r).all(|(a, r)| (a - r).abs() <= b.d * 0.5 + 1e-6));
+    }
+}
