@@ -9,7 +9,7 @@ use proptest::prelude::*;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use step::action::{Action, ObjRef, Verb};
-use step::grammar::{ActionSet, DecomposeGrammar, PlanGrammar, Proposal, Strength, Verdict, VerdictGrammar};
+use step::grammar::{ActionSet, Cause, DecomposeGrammar, PlanGrammar, Proposal, Strength, Verdict, VerdictGrammar};
 use step::llm::engine::{Engine, GenOptions, Generate, Prompt};
 use step::llm::sample::Sampling;
 use step::llm::tiny::{write_tiny_gguf, TinySpec};
@@ -77,7 +77,7 @@ fn decision(kind: Kind, set: ActionSet, chars: usize) -> Result<Decision, String
             }
         }
         Kind::Verdict { decompose } => {
-            let g = VerdictGrammar { actions: set, reason_chars: chars, allow_decompose: decompose };
+            let g = VerdictGrammar { actions: set, reason_chars: chars, allow_decompose: decompose, causes: Cause::ALL.to_vec() };
             Decision {
                 lark: g.to_lark().map_err(err)?,
                 check: Box::new(move |t| {

@@ -571,6 +571,9 @@ pub struct VerdictGrammar {
     pub actions: ActionSet,
     pub reason_chars: usize,
     pub allow_decompose: bool,
+    /// The causes a replan may give (all three by default). A planner that decides affordance and
+    /// environment symbolically offers the model only what the world cannot decide (congruence).
+    pub causes: Vec<Cause>,
 }
 
 /// A parsed verdict.
@@ -584,7 +587,7 @@ pub enum Verdict {
 impl VerdictGrammar {
     /// All three verdicts allowed.
     pub fn new(actions: ActionSet, reason_chars: usize) -> Self {
-        Self { actions, reason_chars, allow_decompose: true }
+        Self { actions, reason_chars, allow_decompose: true, causes: Cause::ALL.to_vec() }
     }
 
     pub fn to_lark(&self) -> Result<String, GrammarError> {
@@ -604,7 +607,10 @@ impl VerdictGrammar {
         if self.allow_decompose {
             alts.push(lark_string("decompose"));
         }
-        let causes: Vec<String> = Cause::ALL.iter().map(|c| lark_string(c.name())).collect();
+        if self.causes.is_empty() {
+            return Err(GrammarError::Shape("the verdict grammar offers no replan cause; give at least one".into()));
+        }
+        let causes: Vec<String> = self.causes.iter().map(|c| lark_string(c.name())).collect();
         alts.push(format!(
             "{} ({}) {} {}",
             lark_string("replan: "),
@@ -635,10 +641,14 @@ impl VerdictGrammar {
             return check_action(&self.actions, text, body).map(Verdict::Execute);
         }
         if let Some(rest) = text.strip_prefix("replan: ") {
-            let (cause, reason) = Cause::ALL
+            let (cause, reason) = self
+                .causes
                 .iter()
                 .find_map(|&c| rest.strip_prefix(c.name()).and_then(|r| r.strip_prefix(": ")).map(|r| (c, r)))
-                .ok_or_else(|| err1(text, "expected 'replan: affordance|congruence|environment: <reason>'"))?;
+                .ok_or_else(|| {
+                    let names: Vec<&str> = self.causes.iter().map(|c| c.name()).collect();
+                    err1(text, &format!("expected 'replan: {}: <reason>'", names.join("|")))
+                })?;
             check_text(text, reason, self.reason_chars)?;
             return Ok(Verdict::Replan { cause, reason: reason.to_string() });
         }
@@ -823,7 +833,7 @@ mod tests {
 
         let e = PlanGrammar { actions: empty.clone(), max_lines: 4 }.to_lark().unwrap_err().to_string();
         assert!(e.contains("admits no action"), "{e}");
-        let v = VerdictGrammar { actions: empty.clone(), reason_chars: 30, allow_decompose: false };
+        let v = VerdictGrammar { actions: empty.clone(), reason_chars: 30, allow_decompose: false, causes: Cause::ALL.to_vec() };
         let e = v.to_lark().unwrap_err().to_string();
         assert!(e.contains("allow decompose"), "{e}");
         let v = VerdictGrammar::new(empty, 30);

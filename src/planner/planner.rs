@@ -15,7 +15,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::env::{Env, Outcome};
-use crate::grammar::{ActionSet, DecomposeGrammar, Proposal, Verdict, VerdictGrammar};
+use crate::grammar::{ActionSet, Cause, DecomposeGrammar, Proposal, Verdict, VerdictGrammar};
 use super::prompt::{NodeView, Prompter};
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
@@ -267,6 +267,7 @@ impl Run<'_> {
         // The previous accepted sibling, with how it ended, and the last rejected attempt.
         let mut previous: Option<String> = None;
         let mut rejected: Option<String> = None;
+        let mut refused: Vec<Action> = Vec::new();
         let mut replans = 0usize;
         let mut children = 0usize;
         let mut accepted = 0usize;
@@ -279,7 +280,14 @@ impl Run<'_> {
             }
             self.check_global()?;
             let view = self.view(node, previous.as_deref(), rejected.as_deref());
-            let actions = self.action_set()?;
+            // An action this node has just rejected is not proposed again until the state changes
+            // (a greedy model would otherwise propose it forever); only exact sets can drop one.
+            let actions = match self.action_set()? {
+                ActionSet::Exact(list) if !refused.is_empty() => {
+                    ActionSet::Exact(list.into_iter().filter(|a| !refused.contains(a)).collect())
+                }
+                set => set,
+            };
             let allow_subgoal = self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth;
             // `done` before any step would end a goal with nothing done; it is offered once a child
             // has been accepted (or when nothing else can be written).
@@ -306,16 +314,24 @@ impl Run<'_> {
             // The verdict on the new child. A proposed action can only be executed or rejected, so
             // its grammar names that one action (the verdict is mostly forced tokens, still the
             // model's choice).
+            // With the symbolic checks on, an action the world says is executable now cannot be
+            // rejected for affordance or environment (the world decides those, not a guess): the
+            // model may still reject it as not serving the goal (congruence).
             let vg = match &child_action {
-                Some(a) => VerdictGrammar {
-                    actions: ActionSet::Exact(vec![a.clone()]),
-                    reason_chars: self.cfg.reason_chars,
-                    allow_decompose: false,
-                },
+                Some(a) => {
+                    let grounded = self.cfg.symbolic_check && self.world()?.why_not(a).is_none();
+                    VerdictGrammar {
+                        actions: ActionSet::Exact(vec![a.clone()]),
+                        reason_chars: self.cfg.reason_chars,
+                        allow_decompose: false,
+                        causes: if grounded { vec![Cause::Congruence] } else { Cause::ALL.to_vec() },
+                    }
+                }
                 None => VerdictGrammar {
                     actions: self.action_set()?,
                     reason_chars: self.cfg.reason_chars,
                     allow_decompose: depth + 1 < budgets.max_depth,
+                    causes: Cause::ALL.to_vec(),
                 },
             };
             let lark = vg.to_lark().map_err(|e| StopCause::Error(format!("verdict grammar: {e}")))?;
@@ -331,6 +347,7 @@ impl Run<'_> {
             self.trace.event("verdict", json!({"node": child, "verdict": vtext}));
             match verdict {
                 Verdict::Replan { cause, reason } => {
+                    refused.extend(child_action.clone());
                     self.set_status(child, Status::Replanned, format!("{cause}: {reason}"));
                     replans += 1;
                     self.stats.replans += 1;
@@ -368,11 +385,13 @@ impl Run<'_> {
                     self.set_status(child, Status::Mapped { action: a.clone() }, "one action");
                     match self.execute(child, &a)? {
                         Ok(summary) => {
+                            refused.clear();
                             accepted += 1;
                             previous = Some(format!("{child_text}: {summary}"));
                             rejected = None;
                         }
                         Err(reason) => {
+                            refused.push(a.clone());
                             replans += 1;
                             self.stats.replans += 1;
                             rejected = Some(rejection(&child_text, &reason));
