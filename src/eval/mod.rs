@@ -5,9 +5,12 @@
 //! - [`task`]: [`Task`] (scene, goal, gold plan, relevant objects); users' task files.
 //! - [`goal`]: node, edge and action goals and their check.
 //! - [`run`]: running a plan on a task; per-task reports and the batch [`Summary`].
+//! - [`plans`]: planners on task sets (`step eval plan`), scored by [`run`]'s scorer.
+//! - [`protocol`]: what a planner is told about a task (instruction, objects, goals; open or closed loop).
 
 pub mod dataset;
 pub mod goal;
+pub mod protocol;
 pub mod run;
 pub mod task;
 
@@ -16,7 +19,7 @@ use std::path::PathBuf;
 pub use dataset::{EaiData, DATA_ENV};
 pub use goal::{ActionGoal, Count, EdgeGoal, Goal, GoalCheck, NodeGoal, RawGoal};
 pub use run::{run_plan, score, PlanInput, RunOutcome, StepOutcome, StepResult, Summary, TaskReport};
-pub use task::{relevant_by_diff, relevant_by_goal, Task, TaskOrigin};
+pub use task::{diff_graphs, relevant_by_diff, relevant_by_gold_run, relevant_by_goal, Relevance, RelevantRule, Task, TaskOrigin};
 
 use crate::world::GraphError;
 
