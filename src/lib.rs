@@ -11,6 +11,7 @@
 //! - [`program`]: plans as text: VirtualHome program lines, JSON, and EAI's LLM-output format.
 //! - [`eval`]: task sets (EAI's VirtualHome set, a user's own file), goal checks, metrics.
 //! - [`grammar`]: Lark grammars built from the embodiment and the scene.
+//! - [`planner`]: the STEP planner: subgoal tree, decomposition and termination, closed loop.
 //! - [`llm`]: the local runtime: GGUF loading, tokenizer and chat template from the GGUF, forward pass,
 //!   sampling, grammar-constrained decoding, prompt-prefix reuse.
 //! - [`bench`]: whole-pipeline measurements behind `step bench` (JSON).
@@ -22,5 +23,6 @@ pub mod cli;
 pub mod eval;
 pub mod grammar;
 pub mod llm;
+pub mod planner;
 pub mod program;
 pub mod world;

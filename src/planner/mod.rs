@@ -1,0 +1,429 @@
+//! The STEP planner: a subgoal tree grown by two grammar-constrained LLM roles, closed-loop on an
+//! executor (the paper's Algorithm 1).
+//!
+//! - [`tree`]: the subgoal tree (petgraph), node statuses with their history, JSON and DOT export.
+//! - [`env`]: the [`Env`] trait leaves execute against (`sim`, `dry-run`; `bridge:CMD` in `bridge`).
+//! - [`trace`]: the JSON-lines trace, flushed per event.
+//! - [`prompt`]: the prompts (files under `prompts/`), ordered for prefix reuse.
+//! - [`planner`]: Algorithm 1 and the ablations' context modes.
+//!
+//! [`plan`] is the one entry point for every planner kind.
+
+pub mod env;
+mod grammar_shim;
+pub mod planner;
+pub mod prompt;
+pub mod replay;
+pub mod trace;
+pub mod tree;
+
+use std::time::Duration;
+
+use serde::Serialize;
+use serde_json::{json, Value};
+
+use crate::action::Action;
+use crate::llm::engine::{GenOptions, Generate};
+use crate::llm::sample::Sampling;
+use crate::world::World;
+
+pub use env::{DryRunEnv, Env, EnvError, Outcome, SimEnv};
+pub use trace::TraceWriter;
+pub use planner::ContextMode;
+pub use tree::{NodeId, Status, SubgoalTree, TreeNode};
+
+// TODO(grammar): replaced by `pub use crate::grammar::Strength` when helper C's branch is merged.
+/// Which actions a grammar may write (issue 7's three strengths).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Strength {
+    Format,
+    Typed,
+    Feasible,
+}
+
+/// Which planner runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PlannerKind {
+    /// The subgoal tree: each decision sees its parent and previous sibling.
+    Step,
+    /// The whole plan in one constrained generation (EAI's protocol).
+    Flat,
+    /// Ablation: each decision sees its parent and every action executed so far (no siblings).
+    NoTree,
+    /// Ablation: each decision sees the root and every action executed so far, no subgoals.
+    NoSubgoalTree,
+    /// A seeded uniform choice among what the grammar admits, in place of the model.
+    Random,
+}
+
+impl PlannerKind {
+    pub const ALL: [PlannerKind; 5] =
+        [PlannerKind::Step, PlannerKind::Flat, PlannerKind::NoTree, PlannerKind::NoSubgoalTree, PlannerKind::Random];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PlannerKind::Step => "step",
+            PlannerKind::Flat => "flat",
+            PlannerKind::NoTree => "no-tree",
+            PlannerKind::NoSubgoalTree => "no-subgoal-tree",
+            PlannerKind::Random => "random",
+        }
+    }
+}
+
+impl std::fmt::Display for PlannerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for PlannerKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        PlannerKind::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
+            format!(
+                "unknown planner '{s}': choose one of {}",
+                PlannerKind::ALL.map(|k| k.name()).join(", ")
+            )
+        })
+    }
+}
+
+/// What the planner is told (the protocol): everything except the instruction is optional.
+pub struct PlanRequest {
+    /// Title + description, or the user's instruction.
+    pub instruction: String,
+    /// E.g. relevant objects with their initial states; goals in words.
+    pub context: Option<String>,
+    /// Object ids grammars may name (the task's relevant objects, or the whole scene).
+    pub focus: Vec<u32>,
+    /// DIAGNOSTIC ONLY, an oracle: a goal check the loop may stop at (with `PlannerConfig::oracle_stop`).
+    /// A planner that stops because the scorer's goals hold is not deciding when to stop; figures
+    /// obtained with it must be labelled as oracle figures and never reported as the planner's.
+    pub oracle: Option<Box<dyn Fn(&World) -> bool>>,
+}
+
+impl PlanRequest {
+    pub fn new(instruction: impl Into<String>, focus: Vec<u32>) -> PlanRequest {
+        PlanRequest { instruction: instruction.into(), context: None, focus, oracle: None }
+    }
+}
+
+impl std::fmt::Debug for PlanRequest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PlanRequest")
+            .field("instruction", &self.instruction)
+            .field("context", &self.context)
+            .field("focus", &self.focus)
+            .field("oracle", &self.oracle.is_some())
+            .finish()
+    }
+}
+
+/// Limits that guarantee the loop ends; the one that ends it is named in [`StopCause::Budget`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Budgets {
+    /// Deepest node below the root (the root is depth 0); a decomposition deeper is a replan.
+    pub max_depth: usize,
+    /// Children a node may have (replanned ones included) before it is abandoned.
+    pub max_children: usize,
+    /// Replans (rejected or failed children) per node before it is abandoned.
+    pub max_replans: usize,
+    pub max_llm_calls: usize,
+    pub max_actions: usize,
+    /// Wall-clock limit for the whole run.
+    #[serde(serialize_with = "ser_opt_duration")]
+    pub deadline: Option<Duration>,
+}
+
+fn ser_opt_duration<S: serde::Serializer>(d: &Option<Duration>, s: S) -> Result<S::Ok, S::Error> {
+    match d {
+        Some(d) => s.serialize_some(&d.as_secs_f64()),
+        None => s.serialize_none(),
+    }
+}
+
+impl Default for Budgets {
+    fn default() -> Self {
+        Budgets { max_depth: 3, max_children: 10, max_replans: 3, max_llm_calls: 300, max_actions: 40, deadline: None }
+    }
+}
+
+/// How a planner runs.
+#[derive(Clone, Debug)]
+pub struct PlannerConfig {
+    pub kind: PlannerKind,
+    pub strength: Strength,
+    pub budgets: Budgets,
+    /// Check each *execute* verdict against the belief world (`why_not`) before executing; a doomed
+    /// one becomes a replan with the executor's reason.
+    pub symbolic_check: bool,
+    /// Sampling and the token cap of each call.
+    pub gen: GenOptions,
+    /// Seed of the `random` planner.
+    pub random_seed: u64,
+    /// Actions the `random` planner executes before it stops.
+    pub random_actions: usize,
+    /// DIAGNOSTIC ONLY: stop when `PlanRequest::oracle` says the goal holds (see there).
+    pub oracle_stop: bool,
+    /// Bytes of the observation shown in each prompt.
+    pub observe_budget: usize,
+    /// Longest subgoal text a decomposition may write.
+    pub subgoal_chars: usize,
+    /// Longest replan reason a verdict may write.
+    pub reason_chars: usize,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        PlannerConfig {
+            kind: PlannerKind::Step,
+            strength: Strength::Feasible,
+            budgets: Budgets::default(),
+            symbolic_check: true,
+            gen: GenOptions { max_tokens: 48, ..GenOptions::default() },
+            random_seed: 0,
+            random_actions: 30,
+            oracle_stop: false,
+            observe_budget: 600,
+            subgoal_chars: 60,
+            reason_chars: 60,
+        }
+    }
+}
+
+/// Why the loop ended.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[serde(tag = "stop", content = "detail", rename_all = "snake_case")]
+pub enum StopCause {
+    /// The model said `done` at the root.
+    Done,
+    /// A budget ran out: which one (`depth`, `children`, `replans`, `llm_calls`, `actions`, `deadline`).
+    Budget(&'static str),
+    /// DIAGNOSTIC: the oracle goal check held.
+    Oracle,
+    /// The model or the executor failed; the trace up to it is intact.
+    Error(String),
+}
+
+impl std::fmt::Display for StopCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopCause::Done => f.write_str("done (the model said so at the root)"),
+            StopCause::Budget(b) => write!(f, "budget: {b}"),
+            StopCause::Oracle => f.write_str("oracle goal check (diagnostic)"),
+            StopCause::Error(e) => write!(f, "error: {e}"),
+        }
+    }
+}
+
+/// One LLM call.
+#[derive(Clone, Debug, Serialize)]
+pub struct CallRecord {
+    /// `decompose`, `terminate` or `flat`.
+    pub role: &'static str,
+    /// The tree node the call was about.
+    pub node: usize,
+    /// sha256 of the rendered prompt's messages and the grammar (hex, first 16 chars).
+    pub prompt_hash: String,
+    pub output: String,
+    pub prompt_tokens: usize,
+    pub reused_tokens: usize,
+    pub output_tokens: usize,
+    pub forced_tokens: usize,
+    pub prefill_ms: f64,
+    pub decode_ms: f64,
+    pub mask_ms: f64,
+    pub total_ms: f64,
+    pub stop: String,
+}
+
+/// Counters of one run.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PlanStats {
+    pub llm_calls: usize,
+    pub prompt_tokens: usize,
+    pub reused_tokens: usize,
+    pub output_tokens: usize,
+    pub forced_tokens: usize,
+    /// Children rejected by the model, by the symbolic check, or failed in execution.
+    pub replans: usize,
+    pub failed_executions: usize,
+    /// *execute* verdicts the symbolic check turned into replans.
+    pub symbolic_rejections: usize,
+    pub abandoned: usize,
+    /// Actions sent to the executor.
+    pub actions: usize,
+    pub wall_ms: f64,
+    pub calls: Vec<CallRecord>,
+}
+
+impl PlanStats {
+    /// Share of prompt tokens whose KV cache was reused.
+    pub fn reuse_rate(&self) -> f64 {
+        if self.prompt_tokens == 0 {
+            0.0
+        } else {
+            self.reused_tokens as f64 / self.prompt_tokens as f64
+        }
+    }
+}
+
+/// The result of a run.
+#[derive(Clone, Debug)]
+pub struct PlanOutcome {
+    pub tree: SubgoalTree,
+    /// Actions sent to the executor, in order, that did not fail (ok or skipped).
+    pub executed: Vec<Action>,
+    pub stop: StopCause,
+    pub stats: PlanStats,
+}
+
+impl PlannerConfig {
+    /// The settings as JSON (the trace header; [`PlannerConfig::from_json`] reads it back for replay).
+    pub fn to_json(&self) -> Value {
+        json!({
+            "kind": self.kind.name(),
+            "strength": self.strength,
+            "budgets": self.budgets,
+            "symbolic_check": self.symbolic_check,
+            "max_tokens": self.gen.max_tokens,
+            "sampling": self.gen.sampling,
+            "reuse_prefix": self.gen.reuse_prefix,
+            "random_seed": self.random_seed,
+            "random_actions": self.random_actions,
+            "oracle_stop": self.oracle_stop,
+            "observe_budget": self.observe_budget,
+            "subgoal_chars": self.subgoal_chars,
+            "reason_chars": self.reason_chars,
+        })
+    }
+
+    /// Reads [`PlannerConfig::to_json`]'s output; missing fields keep their defaults.
+    pub fn from_json(v: &Value) -> Result<PlannerConfig, String> {
+        let mut c = PlannerConfig::default();
+        let usize_of = |v: &Value, k: &str| -> Result<Option<usize>, String> {
+            match v.get(k) {
+                None | Some(Value::Null) => Ok(None),
+                Some(x) => x.as_u64().map(|n| Some(n as usize)).ok_or_else(|| format!("settings.{k}: not a number: {x}")),
+            }
+        };
+        if let Some(k) = v.get("kind").and_then(Value::as_str) {
+            c.kind = k.parse()?;
+        }
+        if let Some(s) = v.get("strength").and_then(Value::as_str) {
+            c.strength = parse_strength(s)?;
+        }
+        if let Some(b) = v.get("budgets") {
+            let d = Budgets::default();
+            c.budgets = Budgets {
+                max_depth: usize_of(b, "max_depth")?.unwrap_or(d.max_depth),
+                max_children: usize_of(b, "max_children")?.unwrap_or(d.max_children),
+                max_replans: usize_of(b, "max_replans")?.unwrap_or(d.max_replans),
+                max_llm_calls: usize_of(b, "max_llm_calls")?.unwrap_or(d.max_llm_calls),
+                max_actions: usize_of(b, "max_actions")?.unwrap_or(d.max_actions),
+                deadline: b.get("deadline").and_then(Value::as_f64).map(Duration::from_secs_f64),
+            };
+        }
+        if let Some(x) = v.get("symbolic_check").and_then(Value::as_bool) {
+            c.symbolic_check = x;
+        }
+        if let Some(n) = usize_of(v, "max_tokens")? {
+            c.gen.max_tokens = n;
+        }
+        if let Some(s) = v.get("sampling") {
+            c.gen.sampling =
+                serde_json::from_value::<Sampling>(s.clone()).map_err(|e| format!("settings.sampling: {e}"))?;
+        }
+        if let Some(x) = v.get("reuse_prefix").and_then(Value::as_bool) {
+            c.gen.reuse_prefix = x;
+        }
+        if let Some(n) = v.get("random_seed").and_then(Value::as_u64) {
+            c.random_seed = n;
+        }
+        if let Some(n) = usize_of(v, "random_actions")? {
+            c.random_actions = n;
+        }
+        if let Some(x) = v.get("oracle_stop").and_then(Value::as_bool) {
+            c.oracle_stop = x;
+        }
+        if let Some(n) = usize_of(v, "observe_budget")? {
+            c.observe_budget = n;
+        }
+        if let Some(n) = usize_of(v, "subgoal_chars")? {
+            c.subgoal_chars = n;
+        }
+        if let Some(n) = usize_of(v, "reason_chars")? {
+            c.reason_chars = n;
+        }
+        Ok(c)
+    }
+}
+
+// TODO(grammar): Strength's FromStr comes with helper C's grammar module.
+/// `format|typed|feasible`.
+pub fn parse_strength(s: &str) -> Result<Strength, String> {
+    match s {
+        "format" => Ok(Strength::Format),
+        "typed" => Ok(Strength::Typed),
+        "feasible" => Ok(Strength::Feasible),
+        _ => Err(format!("unknown grammar strength '{s}': choose format, typed or feasible")),
+    }
+}
+
+/// Runs a planner of any kind on `req` against `env`, writing the trace as it goes: a `header` event
+/// (settings, request, executor, first observation, and whatever the caller put in
+/// [`TraceWriter::set_meta`]: model, scene), the run's events, and an `end` event.
+pub fn plan(
+    model: &mut dyn Generate,
+    env: &mut dyn Env,
+    req: &PlanRequest,
+    cfg: &PlannerConfig,
+    trace: &mut TraceWriter,
+) -> PlanOutcome {
+    let header = json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "meta": trace.meta().clone(),
+        "settings": cfg.to_json(),
+        "request": {"instruction": req.instruction, "context": req.context, "focus": req.focus,
+                    "oracle": req.oracle.is_some() && cfg.oracle_stop},
+        "env": env.name(),
+        "observation": env.observe(cfg.observe_budget),
+    });
+    trace.event("header", header);
+    let out = match cfg.kind {
+        PlannerKind::Step | PlannerKind::NoTree | PlannerKind::NoSubgoalTree => {
+            planner::run_tree(model, env, req, cfg, trace)
+        }
+        // Helper E's baselines (baseline.rs) are dispatched here once merged.
+        PlannerKind::Flat | PlannerKind::Random => PlanOutcome {
+            tree: SubgoalTree::new(&req.instruction),
+            executed: Vec::new(),
+            stop: StopCause::Error(format!("the '{}' planner is not in this build", cfg.kind)),
+            stats: PlanStats::default(),
+        },
+    };
+    trace.event(
+        "end",
+        json!({
+            "stop": out.stop,
+            "executed": out.executed.iter().map(|a| a.to_string()).collect::<Vec<_>>(),
+            "nodes": out.tree.len(),
+            "llm_calls": out.stats.llm_calls,
+            "prompt_tokens": out.stats.prompt_tokens,
+            "reused_tokens": out.stats.reused_tokens,
+            "output_tokens": out.stats.output_tokens,
+            "replans": out.stats.replans,
+            "failed_executions": out.stats.failed_executions,
+            "symbolic_rejections": out.stats.symbolic_rejections,
+            "actions": out.stats.actions,
+            "wall_ms": out.stats.wall_ms,
+            "tree": out.tree.to_json(),
+        }),
+    );
+    out
+}
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,455 @@
+//! Algorithm 1: grow the subgoal tree depth first, left to right, executing each leaf as soon as it is
+//! judged to be an action.
+//!
+//! At a node the decomposition model proposes the next child (from the node's goal, the previous
+//! sibling and how it ended, the observation, and the last rejected attempt); `done` completes the
+//! node. The termination model judges the child: *execute* (after the symbolic check, in the
+//! executor; a failure makes the node propose again with the executor's message), *decompose* (recurse
+//! into the child), or *replan* (the node proposes again with the cause and reason). A node whose
+//! replans or children run over budget is abandoned and its parent goes on; at the root that ends the
+//! run, named by the budget. Global budgets (LLM calls, actions, deadline) end the run wherever it is.
+
+use std::time::Instant;
+
+use serde_json::json;
+use sha2::{Digest, Sha256};
+
+use super::env::{Env, Outcome};
+use super::grammar_shim::{ActionSet, DecomposeGrammar, Proposal, Verdict, VerdictGrammar};
+use super::prompt::{NodeView, Prompter};
+use super::trace::TraceWriter;
+use super::tree::{NodeId, Status, SubgoalTree};
+use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
+use crate::action::Action;
+use crate::llm::engine::{Generate, Prompt};
+use crate::llm::LlmError;
+use crate::world::World;
+
+/// How the context of each decision is made (the paper's ablations).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContextMode {
+    /// Parent + previous sibling (STEP).
+    Step,
+    /// Parent + every executed action.
+    NoTree,
+    /// Root + every executed action; the model proposes actions only.
+    NoSubgoalTree,
+}
+
+impl ContextMode {
+    pub fn of(kind: PlannerKind) -> ContextMode {
+        match kind {
+            PlannerKind::NoTree => ContextMode::NoTree,
+            PlannerKind::NoSubgoalTree => ContextMode::NoSubgoalTree,
+            _ => ContextMode::Step,
+        }
+    }
+}
+
+/// How a node's expansion ended.
+enum End {
+    /// The model said `done` for it.
+    Complete,
+    /// A per-node budget ran out (`replans` or `children`).
+    Abandoned(&'static str),
+}
+
+/// One run's state.
+pub(crate) struct Run<'a> {
+    model: &'a mut dyn Generate,
+    env: &'a mut dyn Env,
+    req: &'a PlanRequest,
+    cfg: &'a PlannerConfig,
+    trace: &'a mut TraceWriter,
+    mode: ContextMode,
+    prompter: Prompter,
+    focus: Vec<u32>,
+    tree: SubgoalTree,
+    stats: PlanStats,
+    executed: Vec<Action>,
+    start: Instant,
+}
+
+/// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
+pub(crate) fn run_tree(
+    model: &mut dyn Generate,
+    env: &mut dyn Env,
+    req: &PlanRequest,
+    cfg: &PlannerConfig,
+    trace: &mut TraceWriter,
+) -> PlanOutcome {
+    let focus = match (req.focus.is_empty(), env.world()) {
+        (false, _) | (true, None) => req.focus.clone(),
+        // No focus given: the whole scene (the character excluded).
+        (true, Some(w)) => w.nodes().map(|n| n.id).filter(|&id| id != w.character()).collect(),
+    };
+    let mut run = Run {
+        model,
+        env,
+        req,
+        cfg,
+        trace,
+        mode: ContextMode::of(cfg.kind),
+        prompter: Prompter::new(&req.instruction, req.context.as_deref()),
+        focus,
+        tree: SubgoalTree::new(&req.instruction),
+        stats: PlanStats::default(),
+        executed: Vec::new(),
+        start: Instant::now(),
+    };
+    run.node_event(0);
+    let root = run.tree.root();
+    run.set_status(root, Status::Decomposing, "the instruction");
+    let stop = match run.expand(root) {
+        Ok(End::Complete) => {
+            run.set_status(root, Status::Executed, "the model said done");
+            StopCause::Done
+        }
+        Ok(End::Abandoned(budget)) => {
+            run.set_status(root, Status::Abandoned, format!("{budget} budget"));
+            StopCause::Budget(budget)
+        }
+        Err(stop) => stop,
+    };
+    run.stats.wall_ms = run.start.elapsed().as_secs_f64() * 1e3;
+    PlanOutcome { tree: run.tree, executed: run.executed, stop, stats: run.stats }
+}
+
+impl Run<'_> {
+    fn node_event(&mut self, id: NodeId) {
+        let n = self.tree.node(id);
+        self.trace.event(
+            "node",
+            json!({"node": id, "parent": n.parent, "depth": n.depth, "text": n.text,
+                   "action": n.action.as_ref().map(|a| a.to_string())}),
+        );
+    }
+
+    fn set_status(&mut self, id: NodeId, status: Status, why: impl Into<String>) {
+        let why = why.into();
+        let mut fields = json!({"node": id, "status": status.name(), "why": why});
+        if let Status::Mapped { action } = &status {
+            fields["action"] = json!(action.to_string());
+        }
+        self.tree.set_status(id, status, why);
+        self.trace.event("status", fields);
+    }
+
+    /// The global budgets, checked before every model call and every action.
+    fn check_global(&self) -> Result<(), StopCause> {
+        let b = &self.cfg.budgets;
+        if let Some(d) = b.deadline {
+            if self.start.elapsed() >= d {
+                return Err(StopCause::Budget("deadline"));
+            }
+        }
+        if self.stats.llm_calls >= b.max_llm_calls {
+            return Err(StopCause::Budget("llm_calls"));
+        }
+        Ok(())
+    }
+
+    fn world(&self) -> Result<&World, StopCause> {
+        self.env.world().ok_or_else(|| {
+            StopCause::Error(format!(
+                "the executor '{}' has no world model, and the grammars are built from one",
+                self.env.name()
+            ))
+        })
+    }
+
+    fn action_set(&self) -> Result<ActionSet, StopCause> {
+        Ok(ActionSet::build(self.cfg.strength, self.world()?, &self.focus))
+    }
+
+    /// The context of a decision at `node`.
+    fn view(&self, node: NodeId, previous: Option<&str>, rejected: Option<&str>) -> NodeView {
+        let observation = self.env.observe(self.cfg.observe_budget);
+        let history = || Some(self.executed.iter().map(|a| a.to_string()).collect());
+        match self.mode {
+            ContextMode::Step => NodeView {
+                observation,
+                goal: self.tree.node(node).text.clone(),
+                previous: previous.map(str::to_string),
+                history: None,
+                rejected: rejected.map(str::to_string),
+            },
+            ContextMode::NoTree => NodeView {
+                observation,
+                goal: self.tree.node(node).text.clone(),
+                previous: None,
+                history: history(),
+                rejected: rejected.map(str::to_string),
+            },
+            ContextMode::NoSubgoalTree => NodeView {
+                observation,
+                goal: self.req.instruction.clone(),
+                previous: None,
+                history: history(),
+                rejected: rejected.map(str::to_string),
+            },
+        }
+    }
+
+    /// One model call under `lark`. `Ok(None)`: the grammar was not complete within the token cap,
+    /// which the caller treats as a rejected attempt.
+    fn call(&mut self, role: &'static str, node: NodeId, prompt: &Prompt, lark: &str) -> Result<Option<String>, StopCause> {
+        self.check_global()?;
+        let hash = prompt_hash(prompt, lark);
+        let t = Instant::now();
+        let r = self.model.generate(prompt, Some(lark), &self.cfg.gen);
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        let g = match r {
+            Ok(g) => g,
+            Err(e) if is_token_budget(&e) => {
+                self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
+                    "kind": "token_budget", "error": e.to_string()}));
+                return Ok(None);
+            }
+            Err(e) => {
+                self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
+                    "kind": "error", "error": e.to_string()}));
+                return Err(StopCause::Error(format!("{role} call at node {node}: {e}")));
+            }
+        };
+        let rec = CallRecord {
+            role,
+            node,
+            prompt_hash: hash,
+            output: g.text.clone(),
+            prompt_tokens: g.prompt_tokens,
+            reused_tokens: g.reused_tokens,
+            output_tokens: g.tokens.len(),
+            forced_tokens: g.forced_tokens,
+            prefill_ms: g.timings.prefill_ms,
+            decode_ms: g.timings.decode_ms,
+            mask_ms: g.timings.mask_us.iter().sum::<f64>() / 1e3,
+            total_ms,
+            stop: format!("{:?}", g.stop).to_lowercase(),
+        };
+        self.stats.prompt_tokens += rec.prompt_tokens;
+        self.stats.reused_tokens += rec.reused_tokens;
+        self.stats.output_tokens += rec.output_tokens;
+        self.stats.forced_tokens += rec.forced_tokens;
+        self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
+        self.tree.add_call(node, self.stats.calls.len());
+        self.stats.calls.push(rec);
+        Ok(Some(g.text))
+    }
+
+    /// Expands `node` until the model says `done` for it or a per-node budget abandons it.
+    fn expand(&mut self, node: NodeId) -> Result<End, StopCause> {
+        let depth = self.tree.node(node).depth;
+        let budgets = self.cfg.budgets.clone();
+        // The previous accepted sibling, with how it ended, and the last rejected attempt.
+        let mut previous: Option<String> = None;
+        let mut rejected: Option<String> = None;
+        let mut replans = 0usize;
+        let mut children = 0usize;
+        let mut accepted = 0usize;
+        loop {
+            if replans > budgets.max_replans {
+                return Ok(End::Abandoned("replans"));
+            }
+            if children >= budgets.max_children {
+                return Ok(End::Abandoned("children"));
+            }
+            self.check_global()?;
+            let view = self.view(node, previous.as_deref(), rejected.as_deref());
+            let actions = self.action_set()?;
+            let allow_subgoal = self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth;
+            // `done` before any step would end a goal with nothing done; it is offered once a child
+            // has been accepted (or when nothing else can be written).
+            let allow_done = accepted > 0 || (!allow_subgoal && actions.is_empty());
+            let dg = DecomposeGrammar {
+                actions,
+                subgoal_chars: self.cfg.subgoal_chars,
+                allow_subgoal,
+                allow_done,
+            };
+            let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
+            let prompt = self.prompter.decompose(&view);
+            let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
+                replans += 1;
+                self.stats.replans += 1;
+                rejected = Some("(no answer within the token limit)".into());
+                continue;
+            };
+            let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e))?;
+            let (child_text, child_action) = match &proposal {
+                Proposal::Done => return Ok(End::Complete),
+                Proposal::Subgoal(s) => (s.clone(), None),
+                Proposal::Action(a) => (a.to_string(), Some(a.clone())),
+            };
+            let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
+            children += 1;
+            self.node_event(child);
+
+            // The verdict on the new child. A proposed action can only be executed or rejected, so
+            // its grammar names that one action (the verdict is mostly forced tokens, still the
+            // model's choice).
+            let vg = match &child_action {
+                Some(a) => VerdictGrammar {
+                    actions: ActionSet::exact(vec![a.clone()]),
+                    reason_chars: self.cfg.reason_chars,
+                    allow_decompose: false,
+                },
+                None => VerdictGrammar {
+                    actions: self.action_set()?,
+                    reason_chars: self.cfg.reason_chars,
+                    allow_decompose: depth + 1 < budgets.max_depth,
+                },
+            };
+            let lark = vg.to_lark().map_err(|e| StopCause::Error(format!("verdict grammar: {e}")))?;
+            let prompt = self.prompter.terminate(&view, &text);
+            let Some(vtext) = self.call("terminate", child, &prompt, &lark)? else {
+                self.set_status(child, Status::Replanned, "no verdict within the token limit");
+                replans += 1;
+                self.stats.replans += 1;
+                rejected = Some(format!("{child_text}: no verdict within the token limit"));
+                continue;
+            };
+            let verdict = vg.parse(&vtext).map_err(|e| grammar_error("terminate", child, &vtext, &e))?;
+            self.trace.event("verdict", json!({"node": child, "verdict": vtext}));
+            match verdict {
+                Verdict::Replan { cause, reason } => {
+                    self.set_status(child, Status::Replanned, format!("{cause}: {reason}"));
+                    replans += 1;
+                    self.stats.replans += 1;
+                    rejected = Some(rejection(&child_text, &reason));
+                }
+                Verdict::Decompose if depth + 1 >= budgets.max_depth => {
+                    // Unreachable under the grammar (decompose is not offered this deep); kept so a
+                    // model that ignores grammars still cannot exceed the depth budget.
+                    self.set_status(child, Status::Replanned, "depth budget: too deep to decompose");
+                    replans += 1;
+                    self.stats.replans += 1;
+                    rejected = Some(format!("{child_text}: too vague; propose one action"));
+                }
+                Verdict::Decompose => {
+                    self.set_status(child, Status::Decomposing, "not one action");
+                    match self.expand(child)? {
+                        End::Complete => {
+                            self.set_status(child, Status::Executed, "all its steps are done");
+                            accepted += 1;
+                            previous = Some(format!("{child_text}: done"));
+                            rejected = None;
+                        }
+                        End::Abandoned(budget) => {
+                            self.stats.abandoned += 1;
+                            self.set_status(child, Status::Abandoned, format!("{budget} budget"));
+                            // The parent goes on, told that this step was given up; it counts as a
+                            // rejected attempt so a parent cannot abandon children forever.
+                            replans += 1;
+                            previous = Some(format!("{child_text}: given up"));
+                            rejected = None;
+                        }
+                    }
+                }
+                Verdict::Execute(a) => {
+                    self.set_status(child, Status::Mapped { action: a.clone() }, "one action");
+                    match self.execute(child, &a)? {
+                        Ok(summary) => {
+                            accepted += 1;
+                            previous = Some(format!("{child_text}: {summary}"));
+                            rejected = None;
+                        }
+                        Err(reason) => {
+                            replans += 1;
+                            self.stats.replans += 1;
+                            rejected = Some(rejection(&child_text, &reason));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The symbolic check, then the executor. `Ok(Ok(summary))`: executed; `Ok(Err(reason))`: the
+    /// child was rejected or failed and the parent proposes again.
+    fn execute(&mut self, child: NodeId, a: &Action) -> Result<Result<String, String>, StopCause> {
+        if self.cfg.symbolic_check {
+            if let Some(f) = self.world()?.why_not(a) {
+                self.stats.symbolic_rejections += 1;
+                self.trace.event("symbolic_check", json!({"node": child, "action": a.to_string(),
+                    "kind": f.kind.name(), "message": f.message}));
+                self.set_status(child, Status::Replanned, format!("environment: {} (symbolic check)", f.message));
+                return Ok(Err(f.message));
+            }
+        }
+        if self.executed.len() >= self.cfg.budgets.max_actions || self.stats.actions >= self.cfg.budgets.max_actions {
+            return Err(StopCause::Budget("actions"));
+        }
+        self.check_global()?;
+        self.stats.actions += 1;
+        let outcome = self.env.execute(a).map_err(|e| {
+            self.trace.event("exec_error", json!({"node": child, "action": a.to_string(), "error": e.to_string()}));
+            StopCause::Error(format!("executing {a}: {e}"))
+        })?;
+        self.trace.event("exec", json!({"node": child, "action": a.to_string(), "outcome": outcome}));
+        let r = match &outcome {
+            Outcome::Ok { .. } | Outcome::Skipped { .. } => {
+                self.executed.push(a.clone());
+                self.set_status(child, Status::Executed, outcome.summary());
+                Ok(match &outcome {
+                    Outcome::Skipped { .. } => "ok (it already was so)".to_string(),
+                    Outcome::Ok { observation: Some(o) } => format!("ok, {o}"),
+                    _ => "ok".to_string(),
+                })
+            }
+            Outcome::Failed { reason, .. } => {
+                self.stats.failed_executions += 1;
+                self.set_status(child, Status::Failed, reason.clone());
+                Err(reason.clone())
+            }
+        };
+        if self.cfg.oracle_stop {
+            if let (Some(oracle), Some(w)) = (&self.req.oracle, self.env.world()) {
+                if oracle(w) {
+                    return Err(StopCause::Oracle);
+                }
+            }
+        }
+        Ok(r)
+    }
+}
+
+/// "step: why", without repeating the step when the reason already names it (executor messages do).
+fn rejection(step: &str, reason: &str) -> String {
+    if reason.contains(step) {
+        reason.to_string()
+    } else {
+        format!("{step}: {reason}")
+    }
+}
+
+fn grammar_error(role: &str, node: NodeId, text: &str, e: &str) -> StopCause {
+    StopCause::Error(format!("grammar error: the {role} output at node {node} does not parse ({e}): {text:?}"))
+}
+
+/// Whether the model stopped because the grammar was not complete within the token cap.
+// TODO(step): LlmError::TokenBudget once helper B's branch is merged.
+fn is_token_budget(e: &LlmError) -> bool {
+    matches!(e, LlmError::Decode(s) if s.contains("was not complete after"))
+}
+
+/// sha256 of the prompt's messages and the grammar, hex, first 16 characters.
+pub(crate) fn prompt_hash(prompt: &Prompt, lark: &str) -> String {
+    let mut h = Sha256::new();
+    match prompt {
+        Prompt::Text(t) => h.update(t.as_bytes()),
+        Prompt::Chat(ms) => {
+            for m in ms {
+                h.update(m.role.as_bytes());
+                h.update([0]);
+                h.update(m.content.as_bytes());
+                h.update([0]);
+            }
+        }
+    }
+    h.update([1]);
+    h.update(lark.as_bytes());
+    let d = h.finalize();
+    d.iter().take(8).map(|b| format!("{b:02x}")).collect()
+}

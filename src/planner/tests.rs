@@ -1,0 +1,372 @@
+//! Algorithm 1 with a scripted model: each test chooses the model's outputs and checks the tree, the
+//! executed plan, the prompts the model was shown and the stop cause.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use super::*;
+use crate::llm::engine::{Generation, Prompt, StopReason, Timings};
+use crate::llm::LlmError;
+
+/// A model that answers from a script and records what it was asked.
+struct Scripted {
+    answers: VecDeque<Result<String, LlmError>>,
+    prompts: Vec<String>,
+    grammars: Vec<String>,
+}
+
+impl Scripted {
+    fn new(answers: &[&str]) -> Scripted {
+        Scripted { answers: answers.iter().map(|s| Ok(s.to_string())).collect(), prompts: vec![], grammars: vec![] }
+    }
+}
+
+fn prompt_text(p: &Prompt) -> String {
+    match p {
+        Prompt::Text(t) => t.clone(),
+        // The system message is the same for every call (and its examples would match the checks).
+        Prompt::Chat(ms) => {
+            ms.iter().filter(|m| m.role != "system").map(|m| format!("<{}>{}", m.role, m.content)).collect::<Vec<_>>().join("\n")
+        }
+    }
+}
+
+impl Generate for Scripted {
+    fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, _: &GenOptions) -> crate::llm::Result<Generation> {
+        self.prompts.push(prompt_text(prompt));
+        self.grammars.push(grammar.unwrap_or_default().to_string());
+        let text = match self.answers.pop_front() {
+            Some(a) => a?,
+            None => panic!("the script ran out at call {}; last prompt:\n{}", self.prompts.len(), self.prompts.last().unwrap()),
+        };
+        Ok(Generation {
+            text: text.clone(),
+            tokens: vec![0; text.len() / 4 + 1],
+            prompt_tokens: 100,
+            reused_tokens: 60,
+            forced_tokens: 0,
+            stop: StopReason::GrammarComplete,
+            timings: Timings::default(),
+        })
+    }
+}
+
+const WALK_APPLE: &str = "[WALK] <apple> (12)";
+const GRAB_APPLE: &str = "[GRAB] <apple> (12)";
+
+fn cfg() -> PlannerConfig {
+    PlannerConfig::default()
+}
+
+fn run_with(model: &mut Scripted, env: &mut dyn Env, cfg: &PlannerConfig) -> PlanOutcome {
+    let req = PlanRequest::new("put the apple in the fridge", vec![]);
+    plan(model, env, &req, cfg, &mut TraceWriter::sink())
+}
+
+fn run(answers: &[&str], cfg: &PlannerConfig) -> (PlanOutcome, Scripted) {
+    let mut m = Scripted::new(answers);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = run_with(&mut m, &mut env, cfg);
+    (out, m)
+}
+
+fn plan_lines(out: &PlanOutcome) -> Vec<String> {
+    out.executed.iter().map(|a| a.to_string()).collect()
+}
+
+#[test]
+fn a_proposed_action_is_judged_executed_and_the_root_ends_with_done() {
+    let a1 = format!("action: {WALK_APPLE}");
+    let v1 = format!("execute: {WALK_APPLE}");
+    let (out, m) = run(&[&a1, &v1, "done"], &cfg());
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+    assert_eq!(out.tree.plan(), out.executed);
+    let child = out.tree.node(1);
+    assert_eq!(child.status, Status::Executed);
+    assert_eq!(child.calls, vec![1], "the verdict call is recorded on the child");
+    assert_eq!(out.tree.node(0).status, Status::Executed);
+    // The verdict on a proposed action may name only that action, and may not decompose it.
+    assert!(m.grammars[1].contains(WALK_APPLE) && !m.grammars[1].contains("[GRAB]"), "{}", m.grammars[1]);
+    assert!(!m.grammars[1].contains("\"decompose\""));
+    // `done` is not offered before the first step, and is after it.
+    assert!(!m.grammars[0].contains("\"done\"") && m.grammars[2].contains("\"done\""));
+    // The second decomposition sees the previous step and its outcome.
+    assert!(m.prompts[2].contains(&format!("Previous step: {WALK_APPLE}: ok")), "{}", m.prompts[2]);
+    assert_eq!(out.stats.llm_calls, 3);
+    assert_eq!(out.stats.actions, 1);
+}
+
+#[test]
+fn decompose_recurses_and_the_child_completes_when_its_steps_are_done() {
+    let (out, m) = run(
+        &[
+            "subgoal: take the apple",
+            "decompose",
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "subgoal: grab it",
+            &format!("execute: {GRAB_APPLE}"),
+            "done",
+            "done",
+        ],
+        &cfg(),
+    );
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE]);
+    let sub = out.tree.node(1);
+    assert_eq!((sub.depth, &sub.status), (1, &Status::Executed));
+    assert_eq!(sub.children, vec![2, 3]);
+    assert_eq!(out.tree.node(3).text, "grab it");
+    assert_eq!(out.tree.node(3).action.as_ref().unwrap().to_string(), GRAB_APPLE);
+    // Inside the subgoal, the goal is the subgoal; back at the root, the previous step is the subgoal.
+    assert!(m.prompts[2].contains("Goal: take the apple"), "{}", m.prompts[2]);
+    assert!(m.prompts[7].contains("Goal: put the apple in the fridge"));
+    assert!(m.prompts[7].contains("Previous step: take the apple: done"), "{}", m.prompts[7]);
+    // The verdict's prompt is the decomposition's conversation plus the proposal and the question.
+    assert!(m.prompts[1].starts_with(&m.prompts[0]));
+    assert!(m.prompts[1].contains("<assistant>subgoal: take the apple\n<user>Judge the step."));
+}
+
+#[test]
+fn each_replan_cause_rejects_the_child_and_the_parent_proposes_again_with_the_reason() {
+    for cause in ["affordance", "congruence", "environment"] {
+        let verdict = format!("replan: {cause}: the fridge is closed");
+        let (out, m) = run(
+            &["subgoal: put the apple away", &verdict, &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+            &cfg(),
+        );
+        assert_eq!(out.stop, StopCause::Done);
+        let n = out.tree.node(1);
+        assert_eq!(n.status, Status::Replanned);
+        assert_eq!(n.history.last().unwrap().1, format!("{cause}: the fridge is closed"));
+        assert!(m.prompts[2].contains("Rejected: put the apple away: the fridge is closed"), "{}", m.prompts[2]);
+        // After an accepted step the rejection is forgotten.
+        assert!(!m.prompts[4].contains("Rejected:"));
+        assert_eq!(out.stats.replans, 1);
+        assert_eq!(plan_lines(&out), [WALK_APPLE]);
+    }
+}
+
+#[test]
+fn a_failed_execution_makes_the_parent_replan_with_the_executors_message() {
+    // Without the symbolic check and with a format grammar, a doomed GRAB reaches the executor.
+    let c = PlannerConfig { symbolic_check: false, strength: Strength::Format, ..cfg() };
+    let (out, m) = run(
+        &[&format!("action: {GRAB_APPLE}"), &format!("execute: {GRAB_APPLE}"), &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+        &c,
+    );
+    assert_eq!(out.tree.node(1).status, Status::Failed);
+    assert_eq!(out.stats.failed_executions, 1);
+    assert_eq!(out.stats.actions, 2);
+    assert!(m.prompts[2].contains("Rejected: cannot [GRAB] <apple> (12): "), "{}", m.prompts[2]);
+    assert!(m.prompts[2].contains("WALK to <apple> (12) first"), "the message names the fix: {}", m.prompts[2]);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+}
+
+#[test]
+fn the_symbolic_check_turns_a_doomed_execute_into_a_replan_without_executing() {
+    let c = PlannerConfig { strength: Strength::Format, ..cfg() };
+    let (out, m) = run(
+        &[&format!("action: {GRAB_APPLE}"), &format!("execute: {GRAB_APPLE}"), &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"],
+        &c,
+    );
+    assert_eq!(out.tree.node(1).status, Status::Replanned);
+    assert!(out.tree.node(1).history.last().unwrap().1.contains("symbolic check"));
+    assert_eq!((out.stats.symbolic_rejections, out.stats.failed_executions, out.stats.actions), (1, 0, 1));
+    assert!(m.prompts[2].contains("WALK to <apple> (12) first"), "{}", m.prompts[2]);
+}
+
+#[test]
+fn the_feasible_grammar_is_rebuilt_from_the_world_before_every_decision() {
+    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"], &cfg());
+    // Before walking, GRAB apple is not feasible; after, it is.
+    assert!(!m.grammars[0].contains(GRAB_APPLE));
+    assert!(m.grammars[2].contains(GRAB_APPLE), "{}", m.grammars[2]);
+}
+
+fn always(answers: &[&str], n: usize) -> Vec<String> {
+    answers.iter().cycle().take(n).map(|s| s.to_string()).collect()
+}
+
+fn run_owned(answers: &[String], cfg: &PlannerConfig, env: &mut dyn Env) -> (PlanOutcome, Scripted) {
+    let refs: Vec<&str> = answers.iter().map(String::as_str).collect();
+    let mut m = Scripted::new(&refs);
+    let out = run_with(&mut m, env, cfg);
+    (out, m)
+}
+
+#[test]
+fn every_budget_ends_the_loop_and_is_named() {
+    let sim = || SimEnv::new(World::demo(), vec![]);
+    let b = Budgets::default();
+    // LLM calls: the model replans forever.
+    let c = PlannerConfig { budgets: Budgets { max_llm_calls: 5, max_replans: 100, max_children: 100, ..b.clone() }, ..cfg() };
+    let (out, _) = run_owned(&always(&["subgoal: x", "replan: congruence: no"], 100), &c, &mut sim());
+    assert_eq!(out.stop, StopCause::Budget("llm_calls"));
+    assert_eq!(out.stats.llm_calls, 5);
+
+    // Replans per node: at the root, the run ends.
+    let c = PlannerConfig { budgets: Budgets { max_replans: 2, ..b.clone() }, ..cfg() };
+    let (out, _) = run_owned(&always(&["subgoal: x", "replan: congruence: no"], 100), &c, &mut sim());
+    assert_eq!(out.stop, StopCause::Budget("replans"));
+    assert_eq!(out.stats.replans, 3);
+    assert_eq!(out.tree.node(0).status, Status::Abandoned);
+
+    // Children per node (a dry run: every action is ok, and the model never says done).
+    let walk = format!("action: {WALK_APPLE}");
+    let exec = format!("execute: {WALK_APPLE}");
+    let c = PlannerConfig { budgets: Budgets { max_children: 3, ..b.clone() }, strength: Strength::Format, symbolic_check: false, ..cfg() };
+    let (out, _) = run_owned(&always(&[&walk, &exec], 100), &c, &mut DryRunEnv::new(World::demo(), vec![]));
+    assert_eq!(out.stop, StopCause::Budget("children"));
+    assert_eq!(out.executed.len(), 3);
+
+    // Executed actions.
+    let c = PlannerConfig { budgets: Budgets { max_actions: 2, ..b.clone() }, strength: Strength::Format, symbolic_check: false, ..cfg() };
+    let (out, _) = run_owned(&always(&[&walk, &exec], 100), &c, &mut DryRunEnv::new(World::demo(), vec![]));
+    assert_eq!(out.stop, StopCause::Budget("actions"));
+    assert_eq!(out.executed.len(), 2);
+
+    // Wall clock.
+    let c = PlannerConfig { budgets: Budgets { deadline: Some(Duration::ZERO), ..b.clone() }, ..cfg() };
+    let (out, m) = run_owned(&[], &c, &mut sim());
+    assert_eq!(out.stop, StopCause::Budget("deadline"));
+    assert!(m.prompts.is_empty());
+}
+
+#[test]
+fn a_child_over_its_replan_budget_is_abandoned_and_its_parent_goes_on() {
+    let c = PlannerConfig { budgets: Budgets { max_replans: 1, ..Budgets::default() }, ..cfg() };
+    let (out, m) = run(
+        &[
+            "subgoal: take the apple",
+            "decompose",
+            "subgoal: a",
+            "replan: environment: no",
+            "subgoal: b",
+            "replan: environment: no",
+            // back at the root, told the step was given up
+            &format!("action: {WALK_APPLE}"),
+            &format!("execute: {WALK_APPLE}"),
+            "done",
+        ],
+        &c,
+    );
+    assert_eq!(out.tree.node(1).status, Status::Abandoned);
+    assert_eq!(out.stats.abandoned, 1);
+    assert!(m.prompts[6].contains("Previous step: take the apple: given up"), "{}", m.prompts[6]);
+    assert_eq!(out.stop, StopCause::Done);
+}
+
+#[test]
+fn the_depth_budget_shapes_the_grammars() {
+    // max_depth 1: the root's children must be actions.
+    let c = PlannerConfig { budgets: Budgets { max_depth: 1, ..Budgets::default() }, ..cfg() };
+    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done"], &c);
+    assert!(!m.grammars[0].contains("subgoal: "), "{}", m.grammars[0]);
+    // max_depth 2: a subgoal of the root may not be decomposed below depth 2... its children are actions.
+    let c = PlannerConfig { budgets: Budgets { max_depth: 2, ..Budgets::default() }, ..cfg() };
+    let (_, m) = run(
+        &["subgoal: take the apple", "decompose", &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done", "done"],
+        &c,
+    );
+    assert!(m.grammars[0].contains("subgoal: ") && m.grammars[1].contains("\"decompose\""));
+    assert!(!m.grammars[2].contains("subgoal: "), "{}", m.grammars[2]);
+}
+
+#[test]
+fn a_token_budget_error_is_a_rejected_attempt_and_other_errors_end_the_run_with_the_trace_intact() {
+    let too_long = || LlmError::Decode("the grammar was not complete after 48 tokens (so far: \"subgoal: a\"); raise max tokens".into());
+    let mut m = Scripted::new(&[]);
+    m.answers = vec![
+        Err(too_long()),
+        Ok(format!("action: {WALK_APPLE}")),
+        Err(too_long()),
+        Ok(format!("action: {WALK_APPLE}")),
+        Ok(format!("execute: {WALK_APPLE}")),
+        Err(LlmError::Tokenizer("boom".into())),
+    ]
+    .into();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.jsonl");
+    let mut trace = TraceWriter::create(&path).unwrap();
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &PlanRequest::new("put the apple in the fridge", vec![]), &cfg(), &mut trace);
+    assert!(matches!(&out.stop, StopCause::Error(e) if e.contains("boom")), "{:?}", out.stop);
+    assert_eq!(out.stats.replans, 2);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+    assert!(m.prompts[1].contains("Rejected: (no answer within the token limit)"), "{}", m.prompts[1]);
+    assert!(m.prompts[3].contains("Rejected: [WALK] <apple> (12): no verdict within the token limit"));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let kinds: Vec<String> = text
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap()["event"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(kinds.first().map(String::as_str), Some("header"));
+    assert_eq!(kinds.last().map(String::as_str), Some("end"));
+    assert_eq!(kinds.iter().filter(|k| *k == "call").count(), 3);
+    assert_eq!(kinds.iter().filter(|k| *k == "call_error").count(), 3);
+    assert!(kinds.contains(&"exec".to_string()));
+}
+
+#[test]
+fn the_ablations_change_only_the_context() {
+    let walk = format!("action: {WALK_APPLE}");
+    let exec = format!("execute: {WALK_APPLE}");
+    let c = PlannerConfig { kind: PlannerKind::NoTree, ..cfg() };
+    let (_, m) = run(&["subgoal: take the apple", "decompose", &walk, &exec, "done", "done"], &c);
+    assert!(m.prompts[2].contains("Goal: take the apple") && m.prompts[2].contains("Actions so far: none"));
+    assert!(m.prompts[4].contains(&format!("Actions so far: {WALK_APPLE}")) && !m.prompts[4].contains("Previous step"));
+
+    let c = PlannerConfig { kind: PlannerKind::NoSubgoalTree, ..cfg() };
+    let (out, m) = run(&[&walk, &exec, "done"], &c);
+    assert!(!m.grammars[0].contains("subgoal: "));
+    assert!(m.prompts[2].contains("Goal: put the apple in the fridge") && m.prompts[2].contains(&format!("Actions so far: {WALK_APPLE}")));
+    assert_eq!(out.stop, StopCause::Done);
+}
+
+#[test]
+fn the_oracle_stop_is_off_by_default_and_labelled_when_on() {
+    let walk = format!("action: {WALK_APPLE}");
+    let exec = format!("execute: {WALK_APPLE}");
+    let mut req = PlanRequest::new("walk to the apple", vec![]);
+    req.oracle = Some(Box::new(|w: &World| w.has_edge(w.character(), crate::world::Relation::Close, 12)));
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let mut m = Scripted::new(&[&walk, &exec, "done"]);
+    let out = plan(&mut m, &mut env, &req, &cfg(), &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "the model decides when to stop");
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let mut m = Scripted::new(&[&walk, &exec]);
+    let out = plan(&mut m, &mut env, &req, &PlannerConfig { oracle_stop: true, ..cfg() }, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Oracle);
+}
+
+#[test]
+fn a_grammar_violation_is_an_error_not_a_guess() {
+    let (out, _) = run(&["subgoal: take the apple!"], &cfg());
+    assert!(matches!(&out.stop, StopCause::Error(e) if e.contains("grammar error")), "{:?}", out.stop);
+}
+
+#[test]
+fn the_tree_exports_to_json_and_dot() {
+    let (out, _) = run(&["subgoal: take the apple", "decompose", &format!("action: {WALK_APPLE}"), &format!("execute: {WALK_APPLE}"), "done", "done"], &cfg());
+    let j = out.tree.to_json();
+    assert_eq!(j["nodes"].as_array().unwrap().len(), 3);
+    assert_eq!(j["nodes"][2]["status"]["status"], "executed");
+    let dot = out.tree.to_dot();
+    assert!(dot.starts_with("digraph") && dot.contains("n0 -> n1;") && dot.contains("n1 -> n2;"), "{dot}");
+    assert!(dot.contains("[executed]"));
+}
+
+#[test]
+fn config_round_trips_through_json() {
+    let c = PlannerConfig {
+        kind: PlannerKind::NoTree,
+        strength: Strength::Typed,
+        budgets: Budgets { max_depth: 2, deadline: Some(Duration::from_millis(1500)), ..Budgets::default() },
+        symbolic_check: false,
+        ..cfg()
+    };
+    let back = PlannerConfig::from_json(&c.to_json()).unwrap();
+    assert_eq!(back.to_json(), c.to_json());
+}
