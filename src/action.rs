@@ -173,11 +173,210 @@ impl Action {
 impl fmt::Display for Action {
     /// VirtualHome's script line: `[PUTBACK] <soap> (1002) <washing_machine> (1001)`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "[{}]", self.verb)?;
-        for a in &self.args {
-            write!(f, " {a}")?;
+        write_action_line(f, self.verb.name(), &self.args)
+    }
+}
+
+// ----- the action line: one renderer, one parser, one error type ------------------------------------
+
+/// Writes an action line in canonical script form, `[VERB] <class> (id) ...`: the one renderer, used
+/// by [`Action`]'s `Display` and by grammars whose verbs are names (which may lie outside [`Verb::ALL`]).
+pub fn write_action_line(out: &mut impl fmt::Write, verb: &str, args: &[ObjRef]) -> fmt::Result {
+    write!(out, "[{verb}]")?;
+    for a in args {
+        write!(out, " {a}")?;
+    }
+    Ok(())
+}
+
+/// [`write_action_line`] into a new string.
+pub fn action_line(verb: &str, args: &[ObjRef]) -> String {
+    let mut s = String::new();
+    // Writing into a String cannot fail.
+    let _ = write_action_line(&mut s, verb, args);
+    s
+}
+
+/// How strictly [`parse_action_line`] reads a line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineSyntax {
+    /// Exactly what [`write_action_line`] prints: single spaces, the verb as written in the table,
+    /// names verbatim, ids in plain decimal without leading zeros. Grammar outputs are checked in this
+    /// form, so a text the checker accepts is one the grammar could have produced.
+    Canonical,
+    /// What people and EAI's data write: spaces anywhere between the parts, verbs in any case,
+    /// object names normalised as VirtualHome does (lower case, spaces as underscores), and EAI's
+    /// `(instance.id)` ids such as `(1.1002)`, where only the node id after the dot is kept (the
+    /// instance number counts mentions in the original crowd-sourced script; EAI drops it too).
+    Lenient,
+}
+
+/// What is wrong with an action line.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ActionLineErrorKind {
+    /// The line does not have the shape `[VERB] <class> (id) ...`; `found` is a quoted excerpt.
+    #[error("expected {expected}, found {found}")]
+    Syntax { expected: String, found: String },
+    #[error("{0}")]
+    UnknownVerb(UnknownVerb),
+    #[error("{0}")]
+    WrongArity(WrongArity),
+}
+
+/// An action line that could not be read: where (1-based character column, when a position helps)
+/// and what.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}{kind}", column.map(|c| format!("column {c}: ")).unwrap_or_default())]
+pub struct ActionLineError {
+    pub column: Option<usize>,
+    pub kind: ActionLineErrorKind,
+}
+
+/// An action line split into its parts, the verb still a name (not yet looked up in [`Verb::ALL`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ActionLineParts {
+    pub verb: String,
+    pub args: Vec<ObjRef>,
+}
+
+const LINE_EXAMPLE: &str = "an action such as `[WALK] <kitchen> (11)`";
+
+/// The 1-based character column of a byte offset.
+fn column_of(line: &str, byte_offset: usize) -> usize {
+    line.get(..byte_offset).map_or(1, |s| s.chars().count() + 1)
+}
+
+/// A short quoted excerpt of what was found, for error messages.
+fn found_excerpt(s: &str) -> String {
+    let s = s.trim();
+    if s.is_empty() {
+        return "the end of the line".to_string();
+    }
+    let mut out: String = s.chars().take(40).collect();
+    if s.chars().count() > 40 {
+        out.push('…');
+    }
+    format!("'{out}'")
+}
+
+/// Splits an action line into verb name and objects, without looking the verb up (grammars check
+/// their own verb names). See [`LineSyntax`] for what each mode accepts.
+pub fn parse_action_parts(line: &str, syntax: LineSyntax) -> Result<ActionLineParts, ActionLineError> {
+    let lenient = syntax == LineSyntax::Lenient;
+    let err = |at: usize, expected: &str, found: &str| ActionLineError {
+        column: Some(column_of(line, at)),
+        kind: ActionLineErrorKind::Syntax { expected: expected.to_string(), found: found_excerpt(found) },
+    };
+    // Skips spaces at `pos` (lenient only); returns the new position.
+    let skip = |pos: usize| if lenient { pos + (line[pos..].len() - line[pos..].trim_start().len()) } else { pos };
+    let mut pos = skip(0);
+    let rest = &line[pos..];
+    if !rest.starts_with('[') {
+        return Err(err(pos, LINE_EXAMPLE, rest));
+    }
+    let Some(close) = rest.find(']') else {
+        return Err(err(pos, "']' closing the action name", rest));
+    };
+    let verb = rest[1..close].to_string();
+    if verb.is_empty() {
+        return Err(err(pos, "an action name between '[' and ']'", &rest[..=close]));
+    }
+    pos += close + 1;
+    let mut args = Vec::new();
+    loop {
+        pos = skip(pos);
+        if pos == line.len() {
+            break;
         }
-        Ok(())
+        // Canonical: exactly one space before each object.
+        if !lenient {
+            if !line[pos..].starts_with(' ') {
+                return Err(err(pos, "' <' starting an object, or the end of the line", &line[pos..]));
+            }
+            pos += 1;
+        }
+        let obj = &line[pos..];
+        if !obj.starts_with('<') {
+            let expected = if lenient {
+                "'<' starting an object such as `<soap> (1002)`, or the end of the line"
+            } else {
+                "' <' starting an object, or the end of the line"
+            };
+            return Err(err(pos, expected, obj));
+        }
+        let Some(gt) = obj.find('>') else {
+            return Err(err(pos, "'>' closing the object name", obj));
+        };
+        let raw_name = &obj[1..gt];
+        let name = if lenient { normalise_name(raw_name) } else { raw_name.to_string() };
+        if name.is_empty() || raw_name.contains('<') {
+            return Err(err(pos, "an object name between '<' and '>'", &obj[..=gt]));
+        }
+        pos += gt + 1;
+        if lenient {
+            pos = skip(pos);
+        } else if line[pos..].starts_with(' ') {
+            pos += 1;
+        } else {
+            return Err(err(pos, &format!("' (' and the id of <{name}>"), &line[pos..]));
+        }
+        let after = &line[pos..];
+        if !after.starts_with('(') {
+            let expected = if lenient {
+                format!("the id of <{name}> in parentheses, such as (1002) or (1.1002)")
+            } else {
+                format!("the id of <{name}> in parentheses, such as (1002)")
+            };
+            return Err(err(pos, &expected, after));
+        }
+        let Some(paren) = after.find(')') else {
+            return Err(err(pos, "')' closing the object id", after));
+        };
+        let id = parse_id(&after[1..paren], lenient).ok_or_else(|| {
+            let expected =
+                if lenient { "an object id such as (1002) or (1.1002)" } else { "an object id such as (1002)" };
+            err(pos, expected, &after[..=paren])
+        })?;
+        pos += paren + 1;
+        args.push(ObjRef::new(name, id));
+    }
+    Ok(ActionLineParts { verb, args })
+}
+
+/// Parses one action line into an [`Action`]: [`parse_action_parts`], then the verb looked up in
+/// [`Verb::ALL`] (canonical: written exactly as its name; lenient: any case) and its arity checked.
+pub fn parse_action_line(line: &str, syntax: LineSyntax) -> Result<Action, ActionLineError> {
+    let parts = parse_action_parts(line, syntax)?;
+    let verb_col = Some(column_of(line, line.find('[').map_or(0, |i| i + 1)));
+    let verb: Verb =
+        parts.verb.parse().ok().filter(|v: &Verb| syntax == LineSyntax::Lenient || v.name() == parts.verb).ok_or_else(
+            || ActionLineError {
+                column: verb_col,
+                kind: ActionLineErrorKind::UnknownVerb(UnknownVerb(parts.verb.clone())),
+            },
+        )?;
+    Action::new(verb, parts.args)
+        .map_err(|e| ActionLineError { column: None, kind: ActionLineErrorKind::WrongArity(e) })
+}
+
+/// VirtualHome's own normalisation of a script's object name: lower case, spaces as underscores.
+fn normalise_name(raw: &str) -> String {
+    raw.split_whitespace().collect::<Vec<_>>().join("_").to_lowercase()
+}
+
+/// Canonical: plain decimal, no sign, no leading zero. Lenient: also spaces around it and EAI's
+/// `instance.id` (the node id after the dot).
+fn parse_id(s: &str, lenient: bool) -> Option<u32> {
+    let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
+    if !lenient {
+        let canonical = digits(s) && (s == "0" || !s.starts_with('0'));
+        return if canonical { s.parse().ok() } else { None };
+    }
+    let s = s.trim();
+    match s.split_once('.') {
+        Some((inst, id)) if digits(inst) && digits(id) => id.parse().ok(),
+        None if digits(s) => s.parse().ok(),
+        _ => None,
     }
 }
 
@@ -212,5 +411,49 @@ mod tests {
         let e = Action::new(Verb::PutBack, vec![soap]).unwrap_err();
         assert_eq!(e.to_string(), "PUTBACK takes 2 object(s), got 1");
         assert_eq!(Action::new(Verb::StandUp, vec![]).unwrap().to_string(), "[STANDUP]");
+    }
+    #[test]
+    fn one_parser_reads_what_display_writes() {
+        let a = Action::new(Verb::PutBack, vec![ObjRef::new("soap", 1002), ObjRef::new("sink", 0)]).unwrap();
+        for syntax in [LineSyntax::Canonical, LineSyntax::Lenient] {
+            assert_eq!(parse_action_line(&a.to_string(), syntax).unwrap(), a);
+        }
+        assert_eq!(parse_action_line("[STANDUP]", LineSyntax::Canonical).unwrap().verb, Verb::StandUp);
+        // Names are verbatim in canonical form (grammars may list any name without '<', '>').
+        let p = parse_action_parts("[A\"B] <say \"hi\"> (1)", LineSyntax::Canonical).unwrap();
+        assert_eq!((p.verb.as_str(), p.args[0].class_name.as_str()), ("A\"B", "say \"hi\""));
+    }
+
+    #[test]
+    fn lenient_mode_takes_eai_ids_spaces_and_case() {
+        let a = parse_action_line("  [putback]<Soap Dish>( 1.1002 )   <sink>(7) ", LineSyntax::Lenient).unwrap();
+        assert_eq!(a.to_string(), "[PUTBACK] <soap_dish> (1002) <sink> (7)");
+        for bad in [
+            "  [WALK] <sink> (7)",
+            "[walk] <sink> (7)",
+            "[WALK] <sink> (1.7)",
+            "[WALK] <sink> (07)",
+            "[WALK]  <sink> (7)",
+            "[WALK] <sink>(7)",
+            "[WALK] <sink> (7) ",
+            "[WALK] <Sink> (7)x",
+        ] {
+            assert!(parse_action_line(bad, LineSyntax::Canonical).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn errors_say_where_and_what() {
+        let e = parse_action_line("[WALK] <sink> (seven)", LineSyntax::Lenient).unwrap_err();
+        assert_eq!(e.to_string(), "column 15: expected an object id such as (1002) or (1.1002), found '(seven)'");
+        let e = parse_action_line("[FLY] <sink> (7)", LineSyntax::Canonical).unwrap_err();
+        assert_eq!(e.column, Some(2));
+        assert!(matches!(e.kind, ActionLineErrorKind::UnknownVerb(_)));
+        let e = parse_action_line("[GRAB]", LineSyntax::Canonical).unwrap_err();
+        assert_eq!(e.to_string(), "GRAB takes 1 object(s), got 0");
+        let e = parse_action_line("walk to the sink", LineSyntax::Lenient).unwrap_err();
+        assert!(e.to_string().contains("expected an action such as `[WALK] <kitchen> (11)`"), "{e}");
+        let e = parse_action_parts("[] <sink> (7)", LineSyntax::Lenient).unwrap_err();
+        assert!(e.to_string().contains("an action name between '[' and ']'"), "{e}");
     }
 }

@@ -10,14 +10,14 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use crate::action::{Action, ObjRef, Verb};
+use crate::action::{action_line, parse_action_line, parse_action_parts, Action, LineSyntax, ObjRef, Verb};
 
 use super::lark::lark_string;
 
 /// Characters a free-text field may use (described in words for prompts and errors).
 pub const TEXT_CHARS: &str = "ASCII letters, digits, space and , . ' _ -";
 /// The same class as a regex character class, for the Lark rendering.
-const TEXT_CLASS_REGEX: &str = r"[A-Za-z0-9 ,.'_\-]";
+pub(super) const TEXT_CLASS_REGEX: &str = r"[A-Za-z0-9 ,.'_\-]";
 /// Tokens made only of text characters, up to 10 of them: the grammar engine precomputes this slice of
 /// the vocabulary and allows it in bulk inside a free-text field with at least 10 characters left,
 /// instead of walking the whole vocabulary (about halves the mask time in text on SmolLM2's vocabulary).
@@ -28,7 +28,7 @@ pub const MAX_TEXT_CHARS: usize = 1000;
 pub const MAX_LINES: usize = 256;
 const MAX_NAME_CHARS: usize = 64;
 
-fn is_text_char(c: char) -> bool {
+pub(super) fn is_text_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, ' ' | ',' | '.' | '\'' | '_' | '-')
 }
 
@@ -101,7 +101,9 @@ pub enum GrammarError {
     BadArity { verb: String, arity: usize },
     #[error("verb {verb:?} restricts {got} argument slot(s) but takes {arity}; give one object list per argument")]
     SlotCount { verb: String, arity: usize, got: usize },
-    #[error("verb {verb:?} allows object {object} which is not among the scene objects; add it to the objects or drop it")]
+    #[error(
+        "verb {verb:?} allows object {object} which is not among the scene objects; add it to the objects or drop it"
+    )]
     UnknownObject { verb: String, object: String },
     #[error("{0}")]
     Shape(String),
@@ -138,13 +140,8 @@ impl Parsed {
         let mut out = Vec::new();
         for (i, l) in self.lines.iter().enumerate() {
             if let PlanLine::Action { verb, args } = l {
-                let err = |reason: String| ParseError {
-                    line: h + i + 1,
-                    text: render(verb, args),
-                    reason,
-                };
-                let v: Verb =
-                    verb.parse().map_err(|e: crate::action::UnknownVerb| err(e.to_string()))?;
+                let err = |reason: String| ParseError { line: h + i + 1, text: render(verb, args), reason };
+                let v: Verb = verb.parse().map_err(|e: crate::action::UnknownVerb| err(e.to_string()))?;
                 out.push(Action::new(v, args.clone()).map_err(|e| err(e.to_string()))?);
             }
         }
@@ -154,63 +151,25 @@ impl Parsed {
 
 /// The script form of an action line with an arbitrary verb name (as [`Action`]'s `Display`).
 fn render(verb: &str, args: &[ObjRef]) -> String {
-    let mut s = format!("[{verb}]");
-    for a in args {
-        // Writing into a String cannot fail.
-        let _ = write!(s, " {a}");
-    }
-    s
+    action_line(verb, args)
 }
 
-/// Parses one line in VirtualHome script form, `[VERB] <class> (id) ...`, into the verb name and its
-/// objects. Only the canonical form is accepted (single spaces, ids without sign or leading zeros),
-/// i.e. exactly what [`Action`]'s `Display` prints.
-pub fn parse_action_line(line: &str) -> Result<(String, Vec<ObjRef>), String> {
-    let rest = line.strip_prefix('[').ok_or("an action line starts with '['")?;
-    let close = rest.find(']').ok_or("no ']' closing the verb")?;
-    let verb = &rest[..close];
-    if verb.is_empty() {
-        return Err("empty verb name".into());
-    }
-    let mut rest = &rest[close + 1..];
-    let mut args = Vec::new();
-    while !rest.is_empty() {
-        rest = rest.strip_prefix(" <").ok_or("expected ' <' before an object")?;
-        let gt = rest.find('>').ok_or("no '>' closing an object name")?;
-        let class = &rest[..gt];
-        rest = rest[gt + 1..].strip_prefix(" (").ok_or("expected ' (' before an object id")?;
-        let rp = rest.find(')').ok_or("no ')' closing an object id")?;
-        let id: u32 = rest[..rp]
-            .parse()
-            .map_err(|_| format!("object id {:?} is not a number", &rest[..rp]))?;
-        rest = &rest[rp + 1..];
-        args.push(ObjRef::new(class, id));
-    }
-    if render(verb, &args) != line {
-        return Err("not in canonical script form (spacing, id digits)".into());
-    }
-    Ok((verb.to_string(), args))
-}
-
-/// Parses a plain action list — every line an action of [`Verb::ALL`] with its arity — as the
-/// example grammars under `grammars/` produce.
+/// Parses a plain action list — every line an action of [`Verb::ALL`] with its arity, in canonical
+/// form — as the example grammars under `grammars/` produce.
 pub fn parse_actions(text: &str) -> Result<Vec<Action>, ParseError> {
     text.split('\n')
         .enumerate()
         .map(|(i, line)| {
-            let err = |reason: String| ParseError { line: i + 1, text: line.to_string(), reason };
-            let (verb, args) = parse_action_line(line).map_err(err)?;
-            let v: Verb =
-                verb.parse().map_err(|e: crate::action::UnknownVerb| err(e.to_string()))?;
-            if v.name() != verb {
-                return Err(err(format!("verb must be written {}", v.name())));
-            }
-            Action::new(v, args).map_err(|e| err(e.to_string()))
+            parse_action_line(line, LineSyntax::Canonical).map_err(|e| ParseError {
+                line: i + 1,
+                text: line.to_string(),
+                reason: e.to_string(),
+            })
         })
         .collect()
 }
 
-fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), GrammarError> {
+pub(super) fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), GrammarError> {
     let bad = |reason: String| Err(GrammarError::BadName { kind, name: name.to_string(), reason });
     if name.is_empty() {
         return bad("it is empty".into());
@@ -226,15 +185,11 @@ fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), 
 
 fn check_label(label: &str) -> Result<(), GrammarError> {
     check_name("label", label, &[])?;
-    if let Some(c) =
-        label.chars().find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | ' ')))
-    {
+    if let Some(c) = label.chars().find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | ' '))) {
         return Err(GrammarError::BadName {
             kind: "label",
             name: label.to_string(),
-            reason: format!(
-                "it contains {c:?}; labels use ASCII letters, digits, '_', '-' and space"
-            ),
+            reason: format!("it contains {c:?}; labels use ASCII letters, digits, '_', '-' and space"),
         });
     }
     Ok(())
@@ -263,10 +218,7 @@ struct Resolved<'a> {
 
 impl ActionGrammar {
     /// A grammar over these verbs and scene objects, 1..=16 action lines, no header, no subgoals.
-    pub fn new(
-        verbs: impl IntoIterator<Item = VerbSpec>,
-        objects: impl IntoIterator<Item = ObjRef>,
-    ) -> Self {
+    pub fn new(verbs: impl IntoIterator<Item = VerbSpec>, objects: impl IntoIterator<Item = ObjRef>) -> Self {
         Self {
             verbs: verbs.into_iter().collect(),
             objects: objects.into_iter().collect(),
@@ -336,11 +288,7 @@ impl ActionGrammar {
                 None => vec![(0..objects.len()).collect(); v.arity],
                 Some(slots) => {
                     if slots.len() != v.arity {
-                        return Err(GrammarError::SlotCount {
-                            verb: v.name.clone(),
-                            arity: v.arity,
-                            got: slots.len(),
-                        });
+                        return Err(GrammarError::SlotCount { verb: v.name.clone(), arity: v.arity, got: slots.len() });
                     }
                     let mut out = Vec::new();
                     for slot in slots {
@@ -368,10 +316,7 @@ impl ActionGrammar {
         for f in &self.header {
             check_label(&f.label)?;
             if !labels.insert(f.label.as_str()) {
-                return Err(GrammarError::Shape(format!(
-                    "label {:?} is used twice; labels must differ",
-                    f.label
-                )));
+                return Err(GrammarError::Shape(format!("label {:?} is used twice; labels must differ", f.label)));
             }
             match &f.kind {
                 FieldKind::Text { max_chars } => check_text_limit(&f.label, *max_chars)?,
@@ -452,10 +397,7 @@ impl ActionGrammar {
             if self.header.is_empty() {
                 start.push("line".into());
                 if self.max_lines > 1 {
-                    start.push(format!(
-                        "{sep_line}{}",
-                        rep(self.min_lines.saturating_sub(1), self.max_lines - 1)
-                    ));
+                    start.push(format!("{sep_line}{}", rep(self.min_lines.saturating_sub(1), self.max_lines - 1)));
                 }
             } else {
                 start.push(format!("{sep_line}{}", rep(self.min_lines, self.max_lines)));
@@ -517,11 +459,8 @@ impl ActionGrammar {
             let _ = writeln!(g, "action: {}", action_alts.join("\n      | "));
         }
         for (id, set) in sets.iter().enumerate() {
-            let alts: Vec<String> = set
-                .iter()
-                .filter_map(|&i| r.objects.get(i))
-                .map(|o| lark_string(&o.to_string()))
-                .collect();
+            let alts: Vec<String> =
+                set.iter().filter_map(|&i| r.objects.get(i)).map(|o| lark_string(&o.to_string())).collect();
             let _ = writeln!(g, "objs_{id}: {}", alts.join(" | "));
         }
         Ok(g)
@@ -531,11 +470,7 @@ impl ActionGrammar {
     /// fields in order, the number of lines, each verb and its arity, each object against the verb's
     /// allowed objects, each free text's characters and length. Independent of llguidance.
     pub fn parse(&self, text: &str) -> Result<Parsed, ParseError> {
-        let r = self.resolve().map_err(|e| ParseError {
-            line: 0,
-            text: String::new(),
-            reason: e.to_string(),
-        })?;
+        let r = self.resolve().map_err(|e| ParseError { line: 0, text: String::new(), reason: e.to_string() })?;
         let lines: Vec<&str> = text.split('\n').collect();
         let err = |i: usize, reason: String| ParseError {
             line: i + 1,
@@ -548,20 +483,14 @@ impl ActionGrammar {
                 return Err(err(i, format!("text has {n} characters; 1..={max} allowed")));
             }
             if let Some(c) = value.chars().find(|&c| !is_text_char(c)) {
-                return Err(err(
-                    i,
-                    format!("character {c:?} is not allowed in text ({TEXT_CHARS})"),
-                ));
+                return Err(err(i, format!("character {c:?} is not allowed in text ({TEXT_CHARS})")));
             }
             Ok(())
         };
 
         let mut fields = Vec::new();
         for (i, f) in self.header.iter().enumerate() {
-            let line = lines
-                .get(i)
-                .copied()
-                .ok_or_else(|| err(i, format!("missing field {:?}", f.label)))?;
+            let line = lines.get(i).copied().ok_or_else(|| err(i, format!("missing field {:?}", f.label)))?;
             let value = line
                 .strip_prefix(f.label.as_str())
                 .and_then(|v| v.strip_prefix(": "))
@@ -579,45 +508,32 @@ impl ActionGrammar {
 
         let h = self.header.len();
         // With a header and no body, the text ends after the last field: no body lines at all.
-        let body: &[&str] =
-            if h > 0 && lines.len() == h { &[] } else { lines.get(h..).unwrap_or(&[]) };
+        let body: &[&str] = if h > 0 && lines.len() == h { &[] } else { lines.get(h..).unwrap_or(&[]) };
         if body.len() < self.min_lines || body.len() > self.max_lines {
             return Err(err(
                 lines.len().saturating_sub(1),
-                format!(
-                    "{} body line(s); {}..={} allowed",
-                    body.len(),
-                    self.min_lines,
-                    self.max_lines
-                ),
+                format!("{} body line(s); {}..={} allowed", body.len(), self.min_lines, self.max_lines),
             ));
         }
         let mut out = Vec::new();
         for (j, line) in body.iter().enumerate() {
             let i = h + j;
             if line.starts_with('[') {
-                let (verb, args) = parse_action_line(line).map_err(|e| err(i, e))?;
+                let (verb, args) = parse_action_parts(line, LineSyntax::Canonical)
+                    .map(|p| (p.verb, p.args))
+                    .map_err(|e| err(i, e.to_string()))?;
                 let v = r
                     .verbs
                     .iter()
                     .find(|v| v.name == verb)
                     .ok_or_else(|| err(i, format!("verb {verb:?} is not allowed here")))?;
                 if args.len() != v.slots.len() {
-                    return Err(err(
-                        i,
-                        format!("{verb} takes {} object(s), got {}", v.slots.len(), args.len()),
-                    ));
+                    return Err(err(i, format!("{verb} takes {} object(s), got {}", v.slots.len(), args.len())));
                 }
                 for (k, a) in args.iter().enumerate() {
-                    let ok = v
-                        .slots
-                        .get(k)
-                        .is_some_and(|slot| slot.iter().any(|&o| r.objects.get(o) == Some(&a)));
+                    let ok = v.slots.get(k).is_some_and(|slot| slot.iter().any(|&o| r.objects.get(o) == Some(&a)));
                     if !ok {
-                        return Err(err(
-                            i,
-                            format!("object {a} is not allowed as argument {} of {verb}", k + 1),
-                        ));
+                        return Err(err(i, format!("object {a} is not allowed as argument {} of {verb}", k + 1)));
                     }
                 }
                 out.push(PlanLine::Action { verb, args });
@@ -640,11 +556,8 @@ impl ActionGrammar {
 /// the demo scene's objects (the robot excluded), 1..=8 lines (at most ~130 tokens).
 pub fn demo_kitchen_grammar() -> ActionGrammar {
     let world = crate::world::World::demo();
-    let objects = world
-        .objects()
-        .into_iter()
-        .filter(|o| o.class_name != "character")
-        .map(|o| ObjRef::new(o.class_name, o.id));
+    let objects =
+        world.objects().into_iter().filter(|o| o.class_name != "character").map(|o| ObjRef::new(o.class_name, o.id));
     ActionGrammar::for_scene(objects).lines(1, 8)
 }
 
@@ -666,14 +579,10 @@ mod tests {
         assert!(lark.contains(r#""[GRAB] " objs_0"#), "{lark}");
         assert!(lark.contains(r#""[PUTIN] " objs_0 " " objs_0"#), "{lark}");
         assert!(lark.contains(r#""[STANDUP]""#), "{lark}");
-        assert!(
-            lark.contains(r#"objs_0: "<apple> (12)" | "<fridge> (5)" | "<kitchen_counter> (7)""#),
-            "{lark}"
-        );
+        assert!(lark.contains(r#"objs_0: "<apple> (12)" | "<fridge> (5)" | "<kitchen_counter> (7)""#), "{lark}");
         assert!(lark.contains(r#"start: line ("\n" line){0,15}"#), "{lark}");
 
-        let p =
-            g.parse("[GRAB] <apple> (12)\n[PUTIN] <apple> (12) <fridge> (5)\n[STANDUP]").unwrap();
+        let p = g.parse("[GRAB] <apple> (12)\n[PUTIN] <apple> (12) <fridge> (5)\n[STANDUP]").unwrap();
         assert_eq!(p.lines.len(), 3);
         let acts = p.actions().unwrap();
         assert_eq!(acts[1].to_string(), "[PUTIN] <apple> (12) <fridge> (5)");
@@ -681,9 +590,7 @@ mod tests {
 
     #[test]
     fn checker_rejects_what_the_spec_forbids() {
-        let g =
-            ActionGrammar::new([VerbSpec::new("GRAB", 1), VerbSpec::new("STANDUP", 0)], kitchen())
-                .lines(1, 2);
+        let g = ActionGrammar::new([VerbSpec::new("GRAB", 1), VerbSpec::new("STANDUP", 0)], kitchen()).lines(1, 2);
         let bad = [
             ("", "expected an action line"),
             ("[GRAB] <banana> (3)", "not allowed as argument 1"),
@@ -691,7 +598,7 @@ mod tests {
             ("[GRAB]", "takes 1 object"),
             ("[STANDUP] <apple> (12)", "takes 0 object"),
             ("[FLY] <apple> (12)", "verb \"FLY\" is not allowed"),
-            ("[GRAB] <apple> (012)", "canonical"),
+            ("[GRAB] <apple> (012)", "column 16: expected an object id such as (1002), found '(012)'"),
             ("[GRAB]  <apple> (12)", "expected ' <'"),
             ("[GRAB] <apple> (12)\n", "expected an action line"),
             ("[STANDUP]\n[STANDUP]\n[STANDUP]", "3 body line(s); 1..=2"),
@@ -708,8 +615,7 @@ mod tests {
         let fridge = ObjRef::new("fridge", 5);
         let g = ActionGrammar::new(
             [
-                VerbSpec::new("PUTIN", 2)
-                    .restricted(vec![vec![apple.clone()], vec![fridge.clone()]]),
+                VerbSpec::new("PUTIN", 2).restricted(vec![vec![apple.clone()], vec![fridge.clone()]]),
                 VerbSpec::new("OPEN", 1).restricted(vec![vec![fridge.clone()]]),
                 VerbSpec::new("EAT", 1).restricted(vec![vec![]]),
             ],
@@ -717,23 +623,13 @@ mod tests {
         );
         let lark = g.to_lark().unwrap();
         assert!(!lark.contains("EAT"), "a verb with no allowed object is dropped:\n{lark}");
-        assert!(
-            lark.contains(r#"objs_0: "<apple> (12)""#)
-                && lark.contains(r#"objs_1: "<fridge> (5)""#),
-            "{lark}"
-        );
+        assert!(lark.contains(r#"objs_0: "<apple> (12)""#) && lark.contains(r#"objs_1: "<fridge> (5)""#), "{lark}");
         assert!(g.parse("[PUTIN] <apple> (12) <fridge> (5)\n[OPEN] <fridge> (5)").is_ok());
-        assert!(g
-            .parse("[PUTIN] <fridge> (5) <apple> (12)")
-            .unwrap_err()
-            .reason
-            .contains("argument 1"));
+        assert!(g.parse("[PUTIN] <fridge> (5) <apple> (12)").unwrap_err().reason.contains("argument 1"));
         assert!(g.parse("[EAT] <apple> (12)").is_err());
 
-        let unknown = ActionGrammar::new(
-            [VerbSpec::new("OPEN", 1).restricted(vec![vec![ObjRef::new("door", 1)]])],
-            kitchen(),
-        );
+        let unknown =
+            ActionGrammar::new([VerbSpec::new("OPEN", 1).restricted(vec![vec![ObjRef::new("door", 1)]])], kitchen());
         assert!(matches!(unknown.to_lark(), Err(GrammarError::UnknownObject { .. })));
         let slots = ActionGrammar::new([VerbSpec::new("OPEN", 1).restricted(vec![])], kitchen());
         assert!(matches!(slots.to_lark(), Err(GrammarError::SlotCount { .. })));
@@ -741,11 +637,7 @@ mod tests {
 
     #[test]
     fn awkward_names_are_escaped_and_ambiguous_ones_rejected() {
-        let objs = vec![
-            ObjRef::new("say \"hi\"", 1),
-            ObjRef::new(r"back\slash", 22),
-            ObjRef::new("tv_2", 3),
-        ];
+        let objs = vec![ObjRef::new("say \"hi\"", 1), ObjRef::new(r"back\slash", 22), ObjRef::new("tv_2", 3)];
         let g = ActionGrammar::new([VerbSpec::new("A\"B", 1)], objs);
         let lark = g.to_lark().unwrap();
         assert!(lark.contains(r#""<say \"hi\"> (1)""#), "{lark}");
@@ -755,17 +647,11 @@ mod tests {
 
         for bad in ["a<b", "a>b", "", "new\nline"] {
             let g = ActionGrammar::new([VerbSpec::new("GRAB", 1)], [ObjRef::new(bad, 1)]);
-            assert!(
-                matches!(g.to_lark(), Err(GrammarError::BadName { kind: "object class", .. })),
-                "{bad:?}"
-            );
+            assert!(matches!(g.to_lark(), Err(GrammarError::BadName { kind: "object class", .. })), "{bad:?}");
         }
         for bad in ["A]", "[A", "A B", ""] {
             let g = ActionGrammar::new([VerbSpec::new(bad, 0)], kitchen());
-            assert!(
-                matches!(g.to_lark(), Err(GrammarError::BadName { kind: "verb", .. })),
-                "{bad:?}"
-            );
+            assert!(matches!(g.to_lark(), Err(GrammarError::BadName { kind: "verb", .. })), "{bad:?}");
         }
         let dup = ActionGrammar::new([VerbSpec::new("A", 0), VerbSpec::new("A", 1)], kitchen());
         assert_eq!(dup.to_lark().unwrap_err(), GrammarError::DuplicateVerb("A".into()));
@@ -783,38 +669,25 @@ mod tests {
         let lark = g.to_lark().unwrap();
         assert!(lark.contains(r#"field_0: "verdict: " ("decompose" | "primitive")"#), "{lark}");
         assert!(lark.contains(r#"field_1: "reason: " /[A-Za-z0-9 ,.'_\-]{1,10}/"#), "{lark}");
-        assert!(
-            lark.contains(r#"line: action | "subgoal: " /[A-Za-z0-9 ,.'_\-]{1,12}/"#),
-            "{lark}"
-        );
+        assert!(lark.contains(r#"line: action | "subgoal: " /[A-Za-z0-9 ,.'_\-]{1,12}/"#), "{lark}");
         assert!(lark.contains(r#"start: field_0 "\n" field_1 ("\n" line){0,3}"#), "{lark}");
 
         let p = g.parse("verdict: primitive\nreason: it's done").unwrap();
         assert_eq!(p.fields[1], ("reason".to_string(), "it's done".to_string()));
         assert!(p.lines.is_empty());
-        let p = g
-            .parse("verdict: decompose\nreason: x\nsubgoal: open fridge\n[WALK] <fridge> (5)")
-            .unwrap();
+        let p = g.parse("verdict: decompose\nreason: x\nsubgoal: open fridge\n[WALK] <fridge> (5)").unwrap();
         assert_eq!(p.lines[0], PlanLine::Subgoal("open fridge".into()));
         assert_eq!(p.actions().unwrap().len(), 1);
 
         assert!(g.parse("verdict: maybe\nreason: x").unwrap_err().reason.contains("not one of"));
-        assert!(g
-            .parse("verdict: primitive\nreason: 12345678901")
-            .unwrap_err()
-            .reason
-            .contains("11 characters"));
+        assert!(g.parse("verdict: primitive\nreason: 12345678901").unwrap_err().reason.contains("11 characters"));
         assert!(g.parse("verdict: primitive\nreason: a;b").unwrap_err().reason.contains("';'"));
         assert!(g.parse("verdict: primitive").unwrap_err().reason.contains("missing field"));
-        assert!(
-            g.parse("verdict: primitive\nreason: x\n").is_err(),
-            "a trailing newline is an empty line"
-        );
+        assert!(g.parse("verdict: primitive\nreason: x\n").is_err(), "a trailing newline is an empty line");
 
         let no_lines = ActionGrammar::new([VerbSpec::new("WALK", 1)], kitchen()).lines(0, 3);
         assert!(matches!(no_lines.to_lark(), Err(GrammarError::Shape(_))));
-        let bad_label =
-            ActionGrammar::new([VerbSpec::new("WALK", 1)], kitchen()).header_text("a:b", 3);
+        let bad_label = ActionGrammar::new([VerbSpec::new("WALK", 1)], kitchen()).header_text("a:b", 3);
         assert!(matches!(bad_label.to_lark(), Err(GrammarError::BadName { kind: "label", .. })));
         let zero = ActionGrammar::new([VerbSpec::new("WALK", 1)], kitchen()).subgoals("sub", 0);
         assert!(matches!(zero.to_lark(), Err(GrammarError::Shape(_))));
@@ -837,12 +710,7 @@ mod tests {
             std::fs::write(&path, &lark).unwrap();
         }
         let on_disk = std::fs::read_to_string(&path).unwrap();
-        assert_eq!(
-            on_disk,
-            lark,
-            "{} is stale: run STEP_UPDATE_GRAMMARS=1 cargo test --lib grammar",
-            path.display()
-        );
+        assert_eq!(on_disk, lark, "{} is stale: run STEP_UPDATE_GRAMMARS=1 cargo test --lib grammar", path.display());
     }
 
     #[test]

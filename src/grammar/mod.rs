@@ -9,11 +9,18 @@
 //! shares nothing with llguidance, so tests can prove that constrained outputs are what the spec says.
 
 mod actions;
+pub mod affordance;
+mod decision;
 mod lark;
 
 pub use actions::{
-    demo_kitchen_grammar, parse_action_line, parse_actions, ActionGrammar, Field, FieldKind,
+    demo_kitchen_grammar, parse_actions, ActionGrammar, Field, FieldKind,
     GrammarError, ParseError, Parsed, PlanLine, VerbSpec, MAX_LINES, MAX_TEXT_CHARS, TEXT_CHARS,
     TEXT_SLICE,
+};
+pub use affordance::{slot_admits, Need, SlotRequirement};
+pub use decision::{
+    scene_objects, ActionSet, Cause, DecomposeGrammar, PlanGrammar, Proposal, Strength, UnknownStrength, Verdict,
+    VerdictGrammar, MAX_ALTERNATIVES,
 };
 pub use lark::lark_string;

@@ -8,10 +8,8 @@
 //! A file may start with header lines (title, then description), ended by a blank line or by the
 //! first step; after the header every non-blank line must be a step, except `#` comment lines.
 
-use super::{column_of, excerpt, Location, ParseError, ParseErrorKind, PlanFormat, Program};
-use crate::action::{Action, ObjRef, Verb};
-
-const EXAMPLE: &str = "an action such as `[WALK] <kitchen> (11)`";
+use super::{Location, ParseError, ParseErrorKind, PlanFormat, Program};
+use crate::action::{parse_action_line, Action, ActionLineErrorKind, LineSyntax};
 
 pub(super) fn parse(text: &str) -> Result<Program, ParseError> {
     let mut lines = text.lines().enumerate().peekable();
@@ -50,85 +48,18 @@ pub fn parse_step_line(line: &str) -> Result<Action, ParseError> {
     parse_at(line, 1)
 }
 
+/// The one action-line parser in its lenient mode (spaces, verb case, EAI's `(1.1002)` ids), its
+/// error placed at `line_no`.
 fn parse_at(line: &str, line_no: usize) -> Result<Action, ParseError> {
-    let err = |at: usize, expected: &str, found: &str| {
-        ParseError::syntax(
-            PlanFormat::Lines,
-            Location::Line { line: line_no, column: Some(column_of(line, at)) },
-            expected,
-            excerpt(found),
-        )
-    };
-    let mut pos = line.len() - line.trim_start().len();
-    let rest = &line[pos..];
-    if !rest.starts_with('[') {
-        return Err(err(pos, EXAMPLE, rest));
-    }
-    let Some(close) = rest.find(']') else {
-        return Err(err(pos, "']' closing the action name", rest));
-    };
-    let verb_text = &rest[1..close];
-    let verb: Verb = verb_text.parse().map_err(|e| ParseError {
+    parse_action_line(line, LineSyntax::Lenient).map_err(|e| ParseError {
         format: PlanFormat::Lines,
-        location: Location::Line { line: line_no, column: Some(column_of(line, pos + 1)) },
-        kind: ParseErrorKind::UnknownVerb(e),
-    })?;
-    pos += close + 1;
-    let mut args = Vec::new();
-    loop {
-        let rest = &line[pos..];
-        let trimmed = rest.trim_start();
-        pos += rest.len() - trimmed.len();
-        if trimmed.is_empty() {
-            break;
-        }
-        if !trimmed.starts_with('<') {
-            return Err(err(pos, "'<' starting an object such as `<soap> (1002)`, or the end of the line", trimmed));
-        }
-        let Some(gt) = trimmed.find('>') else {
-            return Err(err(pos, "'>' closing the object name", trimmed));
-        };
-        let raw_name = &trimmed[1..gt];
-        let name = normalise_name(raw_name);
-        if name.is_empty() || raw_name.contains('<') {
-            return Err(err(pos, "an object name between '<' and '>'", &trimmed[..=gt]));
-        }
-        pos += gt + 1;
-        let rest = &line[pos..];
-        let after = rest.trim_start();
-        pos += rest.len() - after.len();
-        if !after.starts_with('(') {
-            return Err(err(pos, &format!("the id of <{name}> in parentheses, such as (1002) or (1.1002)"), after));
-        }
-        let Some(paren) = after.find(')') else {
-            return Err(err(pos, "')' closing the object id", after));
-        };
-        let id = parse_id(&after[1..paren])
-            .ok_or_else(|| err(pos, "an object id such as (1002) or (1.1002)", &after[..=paren]))?;
-        pos += paren + 1;
-        args.push(ObjRef::new(name, id));
-    }
-    Action::new(verb, args).map_err(|e| ParseError {
-        format: PlanFormat::Lines,
-        location: Location::Line { line: line_no, column: None },
-        kind: ParseErrorKind::WrongArity(e),
+        location: Location::Line { line: line_no, column: e.column },
+        kind: match e.kind {
+            ActionLineErrorKind::Syntax { expected, found } => ParseErrorKind::Syntax { expected, found },
+            ActionLineErrorKind::UnknownVerb(v) => ParseErrorKind::UnknownVerb(v),
+            ActionLineErrorKind::WrongArity(w) => ParseErrorKind::WrongArity(w),
+        },
     })
-}
-
-/// VirtualHome's own normalisation of a script's object name: lower case, spaces as underscores.
-fn normalise_name(raw: &str) -> String {
-    raw.split_whitespace().collect::<Vec<_>>().join("_").to_lowercase()
-}
-
-/// `1002` or `1.1002` (instance.node id) → the node id.
-fn parse_id(s: &str) -> Option<u32> {
-    let s = s.trim();
-    let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
-    match s.split_once('.') {
-        Some((inst, id)) if digits(inst) && digits(id) => id.parse().ok(),
-        None if digits(s) => s.parse().ok(),
-        _ => None,
-    }
 }
 
 pub(super) fn write(p: &Program) -> String {
@@ -152,6 +83,7 @@ pub(super) fn write(p: &Program) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::action::{ObjRef, Verb};
 
     fn soap() -> ObjRef {
         ObjRef::new("soap", 1002)

@@ -170,11 +170,6 @@ impl Program {
     }
 }
 
-/// Characters counted from 1, for column numbers.
-fn column_of(line: &str, byte_offset: usize) -> usize {
-    line.get(..byte_offset).map_or(1, |s| s.chars().count() + 1)
-}
-
 /// A short, printable excerpt of what was found, for error messages.
 fn excerpt(s: &str) -> String {
     let s = s.trim();
