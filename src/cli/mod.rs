@@ -8,9 +8,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod bench_nodes;
 pub mod eval;
 pub mod generate;
-pub mod plan;
 pub mod sim;
 
 #[derive(Parser, Debug)]
@@ -29,10 +29,6 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Plan a task with the STEP subgoal tree on the local model, closed-loop on the world (the main job).
-    Plan(plan::PlanArgs),
-    /// Re-run a `step plan --trace` file with the same model and settings; check it is identical.
-    Replay(plan::ReplayArgs),
     /// Generate text from a prompt with the local model, optionally under a Lark grammar.
     Generate(generate::GenerateArgs),
     /// Benchmarks that print JSON: `step bench llm`.
@@ -61,8 +57,6 @@ pub fn main() -> ExitCode {
 
 fn run(command: Command) -> anyhow::Result<()> {
     match command {
-        Command::Plan(a) => plan::run(&a),
-        Command::Replay(a) => plan::replay(&a),
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
         Command::Sim(a) => sim::run(a),

@@ -10,6 +10,7 @@
 
 pub mod dataset;
 pub mod goal;
+pub mod plans;
 pub mod protocol;
 pub mod run;
 pub mod task;
