@@ -155,7 +155,9 @@ fn flat_with_a_scripted_model_writes_executes_and_exports_the_plan() {
 fn flat_with_a_random_weight_tiny_model_always_parses() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("tiny.gguf");
-    step::llm::tiny::write_tiny_gguf(&step::llm::tiny::TinySpec::llama(), &path).unwrap();
+    // The flat prompt (system text, example, context) is a few thousand byte-level tokens.
+    let spec = step::llm::tiny::TinySpec { context_length: 8192, ..step::llm::tiny::TinySpec::llama() };
+    step::llm::tiny::write_tiny_gguf(&spec, &path).unwrap();
     let mut engine = step::llm::engine::Engine::load(&path).unwrap();
     let tasks = demo_tasks();
     let mut c = cfg(PlannerKind::Flat, Strength::Typed, 0, 0);
