@@ -9,8 +9,8 @@ use std::process::Command;
 use step::eval::plans::{self, EvalEnv, NoModel, PlanEvalConfig, PlanEvalReport};
 use step::eval::protocol::Seen;
 use step::eval::{EaiData, RelevantRule, Task, TaskSource};
-use step::planner::Strength;
 use step::llm::engine::{GenOptions, Generate, Generation, Prompt, StopReason, Timings};
+use step::planner::Strength;
 use step::planner::{Budgets, PlannerConfig, PlannerKind};
 
 fn repo() -> PathBuf {

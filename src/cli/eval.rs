@@ -19,9 +19,9 @@ use super::sim::TaskArgs;
 use crate::eval::plans::{self, EvalEnv, NoModel, PlanEvalConfig, PlanEvalReport};
 use crate::eval::protocol::Seen;
 use crate::eval::{score, PlanInput, Summary, TaskReport};
-use crate::planner::Strength;
 use crate::llm::engine::{Engine, Generate};
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
+use crate::planner::Strength;
 use crate::planner::{Budgets, PlannerConfig, PlannerKind};
 
 #[derive(Args, Debug)]

@@ -137,7 +137,12 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
     let n = cfg.random_actions.min(cfg.budgets.max_actions);
     let stop = loop {
         if stats.actions >= n {
-            break if n == cfg.random_actions { StopCause::Done } else { StopCause::Budget("actions") };
+            // Its fixed length is the random planner's only stopping rule (nobody says "done").
+            break if n == cfg.random_actions {
+                StopCause::Budget("random_actions")
+            } else {
+                StopCause::Budget("actions")
+            };
         }
         if cfg.budgets.deadline.is_some_and(|d| t0.elapsed() >= d) {
             break StopCause::Budget("deadline");
@@ -397,7 +402,7 @@ mod tests {
         let b = run(7, 15, PS::Feasible);
         assert_eq!(a.executed, b.executed);
         assert_eq!(a.stats.actions, 15);
-        assert_eq!(a.stop, StopCause::Done);
+        assert_eq!(a.stop, StopCause::Budget("random_actions"));
         let c = run(8, 15, PS::Feasible);
         assert_ne!(a.executed, c.executed, "another seed, another plan");
     }
