@@ -41,9 +41,12 @@ fn the_example_task_file_loads_and_its_gold_plans_succeed() {
     let s = Summary::of(&reports);
     assert_eq!((s.tasks, s.executed, s.succeeded), (3, 2, 2));
     assert_eq!(s.errors.get("no_plan"), Some(&1));
-    // Without a final graph, the relevant objects are the goal's and gold plan's, the robot and rooms.
+    // With a gold program, EAI's rule: the objects whose node or edges change when the gold program
+    // runs (the robot, the fridge, the counter the apple leaves, the things it was close to), plus the
+    // gold program's own objects.
     let apple = &tasks[0];
-    assert_eq!(apple.relevant, [1, 3, 10, 12]);
+    assert_eq!(apple.relevant, [3, 10, 11, 12, 13, 14, 24, 26]);
+    assert_eq!(apple.relevance.rule, step::eval::RelevantRule::GoldRun);
 }
 
 /// Writes a one-task file around `task` (JSON object text) and returns the load error.

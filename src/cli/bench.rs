@@ -19,6 +19,8 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// The LLM runtime: load, prefill, decode (plain and constrained), mask time, memory.
     Llm(LlmArgs),
+    /// One planner tree node: decomposition and termination latency p50/p99, tokens, time split.
+    Nodes(super::bench_nodes::NodesArgs),
     /// Keep one core busy for a while (the neighbour process of --busy-neighbour).
     #[command(hide = true)]
     Burn {
@@ -56,6 +58,7 @@ pub struct LlmArgs {
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.what {
         BenchCommand::Llm(a) => llm(a),
+        BenchCommand::Nodes(a) => super::bench_nodes::run(a),
         BenchCommand::Burn { seconds } => {
             burn(*seconds);
             Ok(())

@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 
 pub mod args;
 pub mod bench;
+pub mod bench_nodes;
 pub mod eval;
 pub mod generate;
 pub mod plan;

@@ -7,9 +7,13 @@
 //! - [`run`]: running a plan on a task, step by step through `World::step`.
 //! - [`score`]: one task's report (parse errors, run failures, goals).
 //! - [`report`]: the batch [`Summary`], its rates and text table.
+//! - [`plans`]: planners on task sets (`step eval plan`), scored by [`score`]'s scorer.
+//! - [`protocol`]: what a planner is told about a task (instruction, objects, goals; open or closed loop).
 
 pub mod dataset;
 pub mod goal;
+pub mod plans;
+pub mod protocol;
 pub mod report;
 pub mod run;
 pub mod score;
@@ -20,7 +24,7 @@ use std::path::PathBuf;
 pub use dataset::{EaiData, DATA_ENV};
 pub use goal::{ActionGoal, Count, EdgeGoal, Goal, GoalCheck, NodeGoal, RawGoal};
 pub use run::{run_plan, score, PlanInput, RunOutcome, StepOutcome, StepResult, Summary, TaskReport};
-pub use task::{relevant_by_diff, relevant_by_goal, Task, TaskOrigin};
+pub use task::{diff_graphs, relevant_by_diff, relevant_by_gold_run, relevant_by_goal, Relevance, RelevantRule, Task, TaskOrigin};
 
 use crate::world::GraphError;
 

@@ -171,6 +171,7 @@ mod tests {
             gold: None,
             world,
             relevant: vec![1, 2, 3],
+            relevance: Default::default(),
             origin: TaskOrigin::Eai,
         }
     }

@@ -5,15 +5,21 @@
 //! used), `title`, optional `description`, `vh_goal` in EAI's shape, and optional `gold` program lines.
 //! Everything is checked on load: an unknown object in a goal or a gold step names the task and the id.
 //!
-//! A task's relevant objects follow EAI's rule when there is a final graph (objects whose node or
-//! edges differ between the initial and final graph). Without one (a bare scene, or an EAI scene under
-//! a user's own goal) they are the objects the goal and the gold plan name, the character, and the
-//! rooms all of these are in.
+//! A task's relevant objects (the objects the planner is shown and may name, and the only ones EAI's
+//! scorer admits) are made as EAI makes them, so that a user's task gets the same protocol as EAI's
+//! own ([`RelevantRule`], reported per task):
+//! 1. an explicit `relevant` list in the task file, taken as written;
+//! 2. else, when the task has a gold program: run it from the initial state, and take the objects whose
+//!    node differs between the initial and the final state, both ends of every edge in one state only
+//!    (EAI's diff rule), plus every object the gold program names;
+//! 3. else, when the scene file has a final graph (EAI's own tasks): EAI's diff rule on it;
+//! 4. else (no gold, no final graph): the goal's objects, the character and their rooms, a smaller and
+//!    easier list than EAI's, which is why it is only the fallback.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::dataset::{task_id_key, EaiData};
 use super::goal::{Goal, RawGoal};
@@ -43,7 +49,64 @@ pub struct Task {
     pub world: World,
     /// Relevant object ids, ascending (see the module documentation).
     pub relevant: Vec<u32>,
+    /// How `relevant` was made, and what EAI's prompt shows of the initial state besides the list.
+    pub relevance: Relevance,
     pub origin: TaskOrigin,
+}
+
+/// Which rule made a task's relevant objects (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RelevantRule {
+    /// EAI's diff rule on a stored final graph (EAI's tasks; a scene file with a final graph).
+    FinalGraph,
+    /// EAI's diff rule on the state the gold program reaches, plus the gold program's objects.
+    GoldRun,
+    /// Listed in the task file.
+    Explicit,
+    /// Fallback: the goal's objects, the character and their rooms.
+    #[default]
+    Goal,
+}
+
+impl RelevantRule {
+    pub fn name(self) -> &'static str {
+        match self {
+            RelevantRule::FinalGraph => "final_graph",
+            RelevantRule::GoldRun => "gold_run",
+            RelevantRule::Explicit => "explicit",
+            RelevantRule::Goal => "goal",
+        }
+    }
+}
+
+impl std::fmt::Display for RelevantRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How a task's relevant objects were made, and the parts of the initial state EAI's prompt shows
+/// besides the object list: the nodes that change (with their initial states) and the initial edges
+/// that do not survive. Empty for the explicit and goal rules, which have no final state.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Relevance {
+    pub rule: RelevantRule,
+    /// Ids of nodes whose own entry (states, properties) differs between the two states, ascending.
+    pub changed: Vec<u32>,
+    /// Initial edges absent from the final state, as `(from, relation, to)`, sorted.
+    pub removed_edges: Vec<(u32, String, u32)>,
+    /// Anything the rule could not do as intended (e.g. the gold program failed at a step).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// The full result of EAI's diff rule: relevant ids, changed nodes, removed initial edges.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Diff {
+    pub ids: Vec<u32>,
+    pub changed: Vec<u32>,
+    pub removed_edges: Vec<(u32, String, u32)>,
 }
 
 /// Whether two lists hold the same strings with the same multiplicities (EAI compares nodes with
@@ -75,7 +138,36 @@ fn same_node(a: &Node, b: &Node) -> bool {
 /// EAI's relevant objects: ids of nodes that differ between the two graphs (or are in one only), and
 /// both ends of every edge that is in one graph only. Ascending.
 pub fn relevant_by_diff(init: &Graph, fin: &Graph) -> Vec<u32> {
+    diff_ids(&init.nodes, edge_list(init), &fin.nodes, edge_list(fin)).ids
+}
+
+/// [`relevant_by_diff`] with the changed nodes and removed edges (what EAI's prompt shows).
+pub fn diff_graphs(init: &Graph, fin: &Graph) -> Diff {
     diff_ids(&init.nodes, edge_list(init), &fin.nodes, edge_list(fin))
+}
+
+/// EAI's rule for a task with a gold program and no stored final graph: run the gold program from the
+/// initial state (an additional step is skipped; any other failure stops the run, and the note says
+/// where), diff the initial and the reached state, and add every object the gold program names.
+pub fn relevant_by_gold_run(world: &World, gold: &Program) -> (Vec<u32>, Relevance) {
+    let mut end = world.clone();
+    let mut note = None;
+    for (i, a) in gold.actions.iter().enumerate() {
+        match end.execute(a) {
+            Ok(_) => {}
+            Err(f) if f.kind == crate::world::FailureKind::AdditionalStep => {}
+            Err(f) => {
+                note =
+                    Some(format!("the gold program fails at step {} ({a}): {}; diffed up to there", i + 1, f.message));
+                break;
+            }
+        }
+    }
+    let d = diff_graphs(&world.to_graph(), &end.to_graph());
+    let mut ids: BTreeSet<u32> = d.ids.into_iter().collect();
+    ids.extend(gold.actions.iter().flat_map(|a| a.args.iter().map(|o| o.id)).filter(|&id| world.node(id).is_some()));
+    let rel = Relevance { rule: RelevantRule::GoldRun, changed: d.changed, removed_edges: d.removed_edges, note };
+    (ids.into_iter().collect(), rel)
 }
 
 /// A graph's edges as `(from, relation, to)`, for [`diff_ids`].
@@ -89,16 +181,23 @@ pub(crate) fn diff_ids<'a>(
     mut ea: Vec<(u32, &'a str, u32)>,
     b_nodes: &[Node],
     mut eb: Vec<(u32, &'a str, u32)>,
-) -> Vec<u32> {
+) -> Diff {
     let b: HashMap<u32, &Node> = b_nodes.iter().map(|n| (n.id, n)).collect();
     let a_ids: HashSet<u32> = a_nodes.iter().map(|n| n.id).collect();
     let mut ids = BTreeSet::new();
+    let mut changed = BTreeSet::new();
+    let mut removed_edges = Vec::new();
     for n in a_nodes {
         if !b.get(&n.id).is_some_and(|m| same_node(n, m)) {
             ids.insert(n.id);
+            changed.insert(n.id);
         }
     }
-    ids.extend(b_nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id)));
+    let added = b_nodes.iter().map(|n| n.id).filter(|id| !a_ids.contains(id));
+    for id in added {
+        ids.insert(id);
+        changed.insert(id);
+    }
     // Edges as sorted sets, then one merge pass for the symmetric difference.
     for v in [&mut ea, &mut eb] {
         v.sort_unstable();
@@ -114,6 +213,7 @@ pub(crate) fn diff_ids<'a>(
             }
             (Some(x), Some(y)) if x < y => {
                 i += 1;
+                removed_edges.push((x.0, x.1.to_string(), x.2));
                 Some(*x)
             }
             (Some(_), Some(y)) => {
@@ -122,6 +222,7 @@ pub(crate) fn diff_ids<'a>(
             }
             (Some(x), None) => {
                 i += 1;
+                removed_edges.push((x.0, x.1.to_string(), x.2));
                 Some(*x)
             }
             (None, Some(y)) => {
@@ -135,7 +236,7 @@ pub(crate) fn diff_ids<'a>(
             ids.insert(t);
         }
     }
-    ids.into_iter().collect()
+    Diff { ids: ids.into_iter().collect(), changed: changed.into_iter().collect(), removed_edges }
 }
 
 /// Relevant objects without a final graph: the goal's and gold plan's objects, the character, and
@@ -182,23 +283,39 @@ struct LightEdge<'a> {
     to_id: u32,
 }
 
-/// One EAI scene file → the initial world and the relevant objects.
-fn eai_scene(id: &str, text: &str, origin: &str) -> Result<(World, Vec<u32>), EvalError> {
+/// One EAI scene file → the initial world and its relevant objects (EAI's diff rule).
+fn eai_scene(id: &str, text: &str, origin: &str) -> Result<(World, Relevance, Vec<u32>), EvalError> {
     let name = format!("EAI task {id}");
+    let with_rule = |d: Diff| {
+        let rel = Relevance {
+            rule: RelevantRule::FinalGraph,
+            changed: d.changed,
+            removed_edges: d.removed_edges,
+            note: None,
+        };
+        (rel, d.ids)
+    };
     match serde_json::from_str::<LightScene>(crate::program::strip_bom(text)) {
         Ok(l) => {
             let world = World::from_graph(&l.init_graph, &name)?;
             let fin: Vec<(u32, &str, u32)> =
                 l.final_graph.edges.iter().map(|e| (e.from_id, e.relation_type.as_ref(), e.to_id)).collect();
-            let relevant = diff_ids(&l.init_graph.nodes, edge_list(&l.init_graph), &l.final_graph.nodes, fin);
-            Ok((world, relevant))
+            let (rel, ids) =
+                with_rule(diff_ids(&l.init_graph.nodes, edge_list(&l.init_graph), &l.final_graph.nodes, fin));
+            Ok((world, rel, ids))
         }
         // Not the usual shape: the general reader accepts more, and words its errors better.
         Err(_) => {
             let scene = crate::world::parse_scene(text, origin)?;
             let world = World::from_graph(&scene.init, &name)?;
-            let relevant = scene.final_graph.as_ref().map(|f| relevant_by_diff(&scene.init, f)).unwrap_or_default();
-            Ok((world, relevant))
+            let (rel, ids) = match scene.final_graph.as_ref() {
+                Some(f) => with_rule(diff_graphs(&scene.init, f)),
+                None => (
+                    Relevance { note: Some("the scene file has no final graph".into()), ..Relevance::default() },
+                    vec![],
+                ),
+            };
+            Ok((world, rel, ids))
         }
     }
 }
@@ -220,7 +337,7 @@ pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<T
         metas.into_iter().filter(|m| only.is_none_or(|o| o.contains(&m.id))).map(|m| (m.id.clone(), m)).collect();
     let scenes = data.scene_texts(only, eai_scene)?;
     let mut tasks = Vec::with_capacity(scenes.len());
-    for (id, (world, relevant)) in scenes {
+    for (id, (world, relevance, relevant)) in scenes {
         let Some(meta) = metas.get(&id) else { continue }; // a scene file with no task entry
         let goal = meta.goal.to_goal().map_err(|m| EvalError::Data {
             path: data.root.join("eai/resources/task_state_LTL_formula_accurate.json"),
@@ -245,6 +362,7 @@ pub fn load_eai(data: &EaiData, only: Option<&BTreeSet<String>>) -> Result<Vec<T
             gold,
             world,
             relevant,
+            relevance,
             origin: TaskOrigin::Eai,
         });
     }
@@ -263,6 +381,9 @@ struct RawTask {
     vh_goal: RawGoal,
     #[serde(default)]
     gold: Option<Vec<String>>,
+    /// The objects the planner is shown and may name, by id (else made by EAI's rule).
+    #[serde(default)]
+    relevant: Option<Vec<u32>>,
 }
 
 fn looks_like_eai_id(s: &str) -> bool {
@@ -280,7 +401,7 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
         line: e.line(),
         column: e.column(),
         message: format!(
-            "{e} (a task file is a JSON list of {{\"id\", \"scene\", \"title\", \"description\", \"vh_goal\", \"gold\"}})"
+            "{e} (a task file is a JSON list of {{\"id\", \"scene\", \"title\", \"description\", \"vh_goal\", \"gold\", \"relevant\"}})"
         ),
     })?;
     let task_err =
@@ -300,14 +421,14 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
     let base = path.parent().unwrap_or(Path::new("."));
     // Scenes: files beside the task file, or EAI ids (read from the archive in one pass).
     let mut eai_ids = BTreeSet::new();
-    let mut files: BTreeMap<String, (World, Option<Vec<u32>>)> = BTreeMap::new();
+    let mut files: BTreeMap<String, (World, Option<Diff>)> = BTreeMap::new();
     for t in &raw {
         let p = base.join(&t.scene);
         if p.is_file() {
             if !files.contains_key(&t.scene) {
                 let scene = read_scene(&p)?;
                 let world = World::from_graph(&scene.init, &p.display().to_string())?;
-                let rel = scene.final_graph.as_ref().map(|f| relevant_by_diff(&scene.init, f));
+                let rel = scene.final_graph.as_ref().map(|f| diff_graphs(&scene.init, f));
                 files.insert(t.scene.clone(), (world, rel));
             }
         } else if looks_like_eai_id(&t.scene) {
@@ -358,7 +479,34 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
                 Some(p)
             }
         };
-        let relevant = diff_relevant.unwrap_or_else(|| relevant_by_goal(&world, &goal, gold.as_ref()));
+        let (relevant, relevance) = match (&t.relevant, &gold, diff_relevant) {
+            (Some(ids), _, _) => {
+                if let Some(bad) = ids.iter().find(|&&id| world.node(id).is_none()) {
+                    return Err(task_err(
+                        &t.id,
+                        format!(
+                            "relevant: object id {bad} is not in scene '{}' (list ids of the scene's nodes)",
+                            t.scene
+                        ),
+                    ));
+                }
+                let mut ids = ids.clone();
+                ids.sort_unstable();
+                ids.dedup();
+                (ids, Relevance { rule: RelevantRule::Explicit, ..Relevance::default() })
+            }
+            (None, Some(g), _) => relevant_by_gold_run(&world, g),
+            (None, None, Some(d)) => {
+                let rel = Relevance {
+                    rule: RelevantRule::FinalGraph,
+                    changed: d.changed,
+                    removed_edges: d.removed_edges,
+                    note: None,
+                };
+                (d.ids, rel)
+            }
+            (None, None, None) => (relevant_by_goal(&world, &goal, None), Relevance::default()),
+        };
         tasks.push(Task {
             id: t.id,
             title: t.title,
@@ -367,6 +515,7 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
             gold: gold.map(Ok),
             world,
             relevant,
+            relevance,
             origin: TaskOrigin::File(path.to_path_buf()),
         });
     }

@@ -9,6 +9,8 @@
 //!
 //! [`plan`] is the one entry point for every planner kind.
 
+pub mod baseline;
+pub mod bridge;
 pub mod env;
 pub mod planner;
 pub mod prompt;
@@ -376,13 +378,8 @@ pub fn plan(
         PlannerKind::Step | PlannerKind::NoTree | PlannerKind::NoSubgoalTree => {
             planner::run_tree(model, env, req, cfg, trace)
         }
-        // Helper E's baselines (baseline.rs) are dispatched here once merged.
-        PlannerKind::Flat | PlannerKind::Random => PlanOutcome {
-            tree: SubgoalTree::new(&req.instruction),
-            executed: Vec::new(),
-            stop: StopCause::Error(format!("the '{}' planner is not in this build", cfg.kind)),
-            stats: PlanStats::default(),
-        },
+        PlannerKind::Flat => baseline::flat(model, env, req, cfg, trace),
+        PlannerKind::Random => baseline::random(env, req, cfg, trace),
     };
     trace.event(
         "end",
