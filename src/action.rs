@@ -242,12 +242,12 @@ pub struct ActionLineParts {
 const LINE_EXAMPLE: &str = "an action such as `[WALK] <kitchen> (11)`";
 
 /// The 1-based character column of a byte offset.
-fn column_of(line: &str, byte_offset: usize) -> usize {
+pub(crate) fn column_of(line: &str, byte_offset: usize) -> usize {
     line.get(..byte_offset).map_or(1, |s| s.chars().count() + 1)
 }
 
 /// A short quoted excerpt of what was found, for error messages.
-fn found_excerpt(s: &str) -> String {
+pub(crate) fn found_excerpt(s: &str) -> String {
     let s = s.trim();
     if s.is_empty() {
         return "the end of the line".to_string();

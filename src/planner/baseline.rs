@@ -244,24 +244,6 @@ pub fn flat_prompt(req: &PlanRequest, observation: &str) -> Prompt {
     Prompt::Chat(vec![Message::system(FLAT_SYSTEM.trim()), Message::user(user)])
 }
 
-fn hash_prompt(p: &Prompt, grammar: &str) -> String {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    match p {
-        Prompt::Text(t) => h.update(t.as_bytes()),
-        Prompt::Chat(ms) => {
-            for m in ms {
-                h.update(m.role.as_bytes());
-                h.update([0]);
-                h.update(m.content.as_bytes());
-                h.update([0]);
-            }
-        }
-    }
-    h.update(grammar.as_bytes());
-    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
-}
-
 /// The `flat` planner (see the module documentation).
 pub fn flat(
     model: &mut dyn Generate,
@@ -294,7 +276,7 @@ pub fn flat(
     };
     let prompt = flat_prompt(req, &env.observe(cfg.observe_budget));
     let opts = GenOptions { max_tokens: cfg.gen.max_tokens.max(max_lines * TOKENS_PER_LINE), ..cfg.gen.clone() };
-    let prompt_hash = hash_prompt(&prompt, &lark);
+    let prompt_hash = super::planner::prompt_hash(&prompt, &lark);
     let call_t0 = Instant::now();
     let generated = model.generate(&prompt, Some(&lark), &opts);
     let total_ms = call_t0.elapsed().as_secs_f64() * 1e3;

@@ -181,23 +181,8 @@ pub fn strip_bom(text: &str) -> &str {
     text.strip_prefix('\u{feff}').unwrap_or(text)
 }
 
-/// Characters counted from 1, for column numbers.
-fn column_of(line: &str, byte_offset: usize) -> usize {
-    line.get(..byte_offset).map_or(1, |s| s.chars().count() + 1)
-}
-
-/// A short, printable excerpt of what was found, for error messages.
-fn excerpt(s: &str) -> String {
-    let s = s.trim();
-    if s.is_empty() {
-        return "the end of the line".to_string();
-    }
-    let mut out: String = s.chars().take(40).collect();
-    if s.chars().count() > 40 {
-        out.push('…');
-    }
-    format!("'{out}'")
-}
+// Columns and excerpts in error messages are the action-line parser's, so every plan error reads alike.
+pub(crate) use crate::action::{column_of, found_excerpt as excerpt};
 
 #[cfg(test)]
 mod tests {
