@@ -268,6 +268,7 @@ impl Run<'_> {
         let mut previous: Option<String> = None;
         let mut rejected: Option<String> = None;
         let mut refused: Vec<Action> = Vec::new();
+        let mut last_done: Option<Action> = None;
         let mut replans = 0usize;
         let mut children = 0usize;
         let mut accepted = 0usize;
@@ -280,12 +281,13 @@ impl Run<'_> {
             }
             self.check_global()?;
             let view = self.view(node, previous.as_deref(), rejected.as_deref());
-            // An action this node has just rejected is not proposed again until the state changes
-            // (a greedy model would otherwise propose it forever); only exact sets can drop one.
+            // An action this node has just rejected is not proposed again until the state changes,
+            // nor the action it has just executed (a greedy tiny model otherwise repeats one step
+            // forever); only exact sets can drop one.
             let actions = match self.action_set()? {
-                ActionSet::Exact(list) if !refused.is_empty() => {
-                    ActionSet::Exact(list.into_iter().filter(|a| !refused.contains(a)).collect())
-                }
+                ActionSet::Exact(list) if !refused.is_empty() || last_done.is_some() => ActionSet::Exact(
+                    list.into_iter().filter(|a| !refused.contains(a) && last_done.as_ref() != Some(a)).collect(),
+                ),
                 set => set,
             };
             let allow_subgoal = self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth;
@@ -386,6 +388,7 @@ impl Run<'_> {
                     match self.execute(child, &a)? {
                         Ok(summary) => {
                             refused.clear();
+                            last_done = Some(a.clone());
                             accepted += 1;
                             previous = Some(format!("{child_text}: {summary}"));
                             rejected = None;
