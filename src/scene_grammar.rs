@@ -3,9 +3,57 @@
 //! the planner's grammar family through the LLM runtime, the one place the two sides are joined in
 //! tests.
 
-use crate::action::ObjRef;
-use crate::grammar::ActionGrammar;
+use crate::action::{ObjRef, Verb};
+use crate::grammar::{ActionGrammar, ActionSet, Strength, VerbSpec};
+use crate::world::affordance::SlotRequirement;
 use crate::world::World;
+
+/// The scene objects with these ids, the character and unknown ids left out, by id, once each (the
+/// objects [`World::feasible_actions_among`] ranges over).
+pub fn scene_objects(world: &World, ids: &[u32]) -> Vec<ObjRef> {
+    let ch = world.character();
+    let mut v: Vec<ObjRef> = ids
+        .iter()
+        .filter(|&&id| id != ch)
+        .filter_map(|&id| world.node(id).map(|n| ObjRef::new(n.class_name, n.id)))
+        .collect();
+    v.sort_by_key(|o| o.id);
+    v.dedup_by_key(|o| o.id);
+    v
+}
+
+/// `typed`: each slot of each verb limited to the objects among `ids` whose properties fit it
+/// ([`SlotRequirement::of`]); verbs with a slot nothing fits are left out.
+pub fn typed_set(world: &World, ids: &[u32]) -> ActionSet {
+    let objects = scene_objects(world, ids);
+    let mut verbs = Vec::new();
+    for &v in Verb::ALL {
+        let slots: Vec<Vec<ObjRef>> = (0..v.arity())
+            .map(|i| {
+                let need = SlotRequirement::of(v, i);
+                objects.iter().filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n))).cloned().collect()
+            })
+            .collect();
+        if slots.iter().all(|s: &Vec<ObjRef>| !s.is_empty()) {
+            verbs.push(VerbSpec::from(v).restricted(slots));
+        }
+    }
+    ActionSet::Slots(verbs, objects)
+}
+
+/// `feasible`: exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]).
+pub fn feasible_set(world: &World, ids: &[u32]) -> ActionSet {
+    ActionSet::Exact(world.feasible_actions_among(ids))
+}
+
+/// The action set of the given strength over the objects `ids` of `world`.
+pub fn action_set(strength: Strength, world: &World, ids: &[u32]) -> ActionSet {
+    match strength {
+        Strength::Format => ActionSet::format(&scene_objects(world, ids)),
+        Strength::Typed => typed_set(world, ids),
+        Strength::Feasible => feasible_set(world, ids),
+    }
+}
 
 /// The demo kitchen's action grammar (`grammars/actions.lark`): every verb of the embodiment over
 /// the demo scene's objects (the robot excluded), 1..=8 lines (at most ~130 tokens).
@@ -22,6 +70,54 @@ mod tests;
 #[cfg(test)]
 mod file_tests {
     use super::*;
+    use crate::action::Action;
+    use crate::grammar::{DecomposeGrammar, PlanGrammar, VerdictGrammar};
+
+    fn act(v: Verb, args: &[(&str, u32)]) -> Action {
+        Action::new(v, args.iter().map(|&(c, i)| ObjRef::new(c, i)).collect()).unwrap()
+    }
+
+    #[test]
+    fn typed_and_feasible_sets_on_the_demo_scene() {
+        let w = World::demo();
+        let ids: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let typed = typed_set(&w, &ids);
+        assert!(typed.contains(&act(Verb::Grab, &[("apple", 12)])));
+        assert!(!typed.contains(&act(Verb::Grab, &[("sofa", 30)])), "the sofa is not GRABBABLE");
+        assert!(!typed.contains(&act(Verb::Sit, &[("fridge", 10)])));
+        assert!(typed.contains(&act(Verb::Sit, &[("sofa", 30)])));
+        assert!(!typed.contains(&act(Verb::Open, &[("apple", 12)])));
+        assert!(!typed.contains(&act(Verb::SwitchOn, &[("apple", 12)])));
+        assert!(typed.contains(&act(Verb::PutIn, &[("apple", 12), ("fridge", 10)])));
+        assert!(!typed.contains(&act(Verb::PutIn, &[("fridge", 10), ("apple", 12)])), "a fridge cannot be held");
+        assert!(!typed.contains(&act(Verb::Walk, &[("character", 3)])), "the robot is never an object");
+        let feasible = feasible_set(&w, &ids);
+        assert_eq!(feasible.len(), w.feasible_actions().len());
+        assert!(feasible.contains(&act(Verb::Walk, &[("apple", 12)])));
+        assert!(!feasible.contains(&act(Verb::Grab, &[("apple", 12)])), "too far");
+        for s in Strength::ALL {
+            let set = action_set(s, &w, &ids);
+            assert!(!set.is_empty(), "{s}");
+            for lark in [
+                DecomposeGrammar::new(set.clone(), 40).to_lark().unwrap(),
+                VerdictGrammar::new(set.clone(), 40).to_lark().unwrap(),
+                PlanGrammar { actions: set.clone(), max_lines: 8 }.to_lark().unwrap(),
+            ] {
+                assert!(lark.contains("action: "), "{s}: {lark}");
+            }
+        }
+        let sizes: Vec<usize> = Strength::ALL.iter().map(|&s| action_set(s, &w, &ids).len()).collect();
+        assert!(sizes[0] > sizes[1] && sizes[1] > sizes[2], "format > typed > feasible: {sizes:?}");
+    }
+
+    #[test]
+    fn a_typed_set_whose_objects_fit_no_slot_keeps_only_verbs_they_fit() {
+        let t = typed_set(&World::demo(), &[1]);
+        assert!(t.contains(&act(Verb::StandUp, &[])));
+        assert!(!t.contains(&act(Verb::Grab, &[("kitchen", 1)])));
+        assert!(t.contains(&act(Verb::Walk, &[("kitchen", 1)])));
+    }
+
 
     /// `grammars/actions.lark` is the builder's output for the demo kitchen (never edited by hand):
     /// the test fails if it drifts; `STEP_UPDATE_GRAMMARS=1 cargo test --lib scene_grammar` rewrites it.

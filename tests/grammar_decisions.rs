@@ -148,7 +148,7 @@ proptest! {
         qwen in any::<bool>(),
     ) {
         let (world, ids) = random_scene(scene_seed, steps, focus);
-        let set = ActionSet::build(strength, &world, &ids);
+        let set = step::scene_grammar::action_set(strength, &world, &ids);
         let empty = set.is_empty();
         let d = match decision(kind, set, chars) {
             Ok(d) => d,
@@ -218,7 +218,7 @@ proptest! {
         qwen in any::<bool>(),
     ) {
         let (world, ids) = random_scene(scene_seed, steps, focus);
-        let Ok(d) = decision(kind, ActionSet::build(strength, &world, &ids), chars) else { return Ok(()) };
+        let Ok(d) = decision(kind, step::scene_grammar::action_set(strength, &world, &ids), chars) else { return Ok(()) };
         let engine = walk_engine(qwen);
         let text = mask_walk(engine, &d.lark, seed);
         let actions = (d.check)(&text);
@@ -301,7 +301,7 @@ fn a_whole_eai_scene_compiles_and_decodes() {
     let dir = tempfile::tempdir().unwrap();
     let mut engine = engine(true, 2, &dir);
     for strength in Strength::ALL {
-        let set = ActionSet::build(strength, &world, &ids);
+        let set = step::scene_grammar::action_set(strength, &world, &ids);
         assert!(set.len() > 300, "{strength}: {} actions", set.len());
         eprintln!("task {} scene: {} objects, {strength}: {} actions", meta[0].id, ids.len(), set.len());
         let g = DecomposeGrammar::new(set.clone(), 40);

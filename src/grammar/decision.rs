@@ -19,10 +19,8 @@ use std::fmt::{self, Write};
 use std::str::FromStr;
 
 use crate::action::{parse_action_line, Action, LineSyntax, ObjRef, Verb};
-use crate::world::World;
 
 use super::actions::{check_name, is_text_char, GrammarError, ParseError, VerbSpec, TEXT_CLASS_REGEX};
-use super::affordance::SlotRequirement;
 use super::lark::lark_string;
 use super::{MAX_LINES, MAX_TEXT_CHARS, TEXT_CHARS};
 
@@ -90,61 +88,10 @@ pub enum ActionSet {
     Exact(Vec<Action>),
 }
 
-/// The scene objects with these ids, the character and unknown ids left out, by id, once each (the
-/// objects [`World::feasible_actions_among`] ranges over).
-pub fn scene_objects(world: &World, ids: &[u32]) -> Vec<ObjRef> {
-    let ch = world.character();
-    let mut v: Vec<ObjRef> = ids
-        .iter()
-        .filter(|&&id| id != ch)
-        .filter_map(|&id| world.node(id).map(|n| ObjRef::new(n.class_name, n.id)))
-        .collect();
-    v.sort_by_key(|o| o.id);
-    v.dedup_by_key(|o| o.id);
-    v
-}
-
 impl ActionSet {
     /// Every verb of [`Verb::ALL`] over these objects in every slot.
     pub fn format(objects: &[ObjRef]) -> ActionSet {
         ActionSet::Slots(Verb::ALL.iter().map(|&v| VerbSpec::from(v)).collect(), objects.to_vec())
-    }
-
-    /// Each slot of each verb limited to the objects among `ids` whose properties fit it
-    /// ([`SlotRequirement::of`]); verbs with a slot nothing fits are left out.
-    pub fn typed(world: &World, ids: &[u32]) -> ActionSet {
-        let objects = scene_objects(world, ids);
-        let mut verbs = Vec::new();
-        for &v in Verb::ALL {
-            let slots: Vec<Vec<ObjRef>> = (0..v.arity())
-                .map(|i| {
-                    let need = SlotRequirement::of(v, i);
-                    objects
-                        .iter()
-                        .filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n)))
-                        .cloned()
-                        .collect()
-                })
-                .collect();
-            if slots.iter().all(|s: &Vec<ObjRef>| !s.is_empty()) {
-                verbs.push(VerbSpec::from(v).restricted(slots));
-            }
-        }
-        ActionSet::Slots(verbs, objects)
-    }
-
-    /// Exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]).
-    pub fn feasible(world: &World, ids: &[u32]) -> ActionSet {
-        ActionSet::Exact(world.feasible_actions_among(ids))
-    }
-
-    /// The set of the given strength over the objects `ids` of `world`.
-    pub fn build(strength: Strength, world: &World, ids: &[u32]) -> ActionSet {
-        match strength {
-            Strength::Format => ActionSet::format(&scene_objects(world, ids)),
-            Strength::Typed => ActionSet::typed(world, ids),
-            Strength::Feasible => ActionSet::feasible(world, ids),
-        }
     }
 
     /// Whether the set admits `a`. Reads the spec directly (this is the checkers' half, independent
@@ -840,11 +787,6 @@ mod tests {
         let lark = v.to_lark().unwrap();
         assert!(!lark.contains("execute"), "{lark}");
         assert_eq!(v.parse("decompose").unwrap(), Verdict::Decompose);
-        // A typed set whose objects fit no slot: only the object-less verbs remain.
-        let t = ActionSet::typed(&World::demo(), &[1]);
-        assert!(t.contains(&act(Verb::StandUp, &[])));
-        assert!(!t.contains(&act(Verb::Grab, &[("kitchen", 1)])));
-        assert!(t.contains(&act(Verb::Walk, &[("kitchen", 1)])));
     }
 
     #[test]
@@ -913,36 +855,4 @@ mod tests {
         assert!(VerdictGrammar::new(set, MAX_TEXT_CHARS + 1).to_lark().is_err());
     }
 
-    #[test]
-    fn typed_and_feasible_sets_on_the_demo_scene() {
-        let w = World::demo();
-        let ids: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        let typed = ActionSet::typed(&w, &ids);
-        assert!(typed.contains(&act(Verb::Grab, &[("apple", 12)])));
-        assert!(!typed.contains(&act(Verb::Grab, &[("sofa", 30)])), "the sofa is not GRABBABLE");
-        assert!(!typed.contains(&act(Verb::Sit, &[("fridge", 10)])));
-        assert!(typed.contains(&act(Verb::Sit, &[("sofa", 30)])));
-        assert!(!typed.contains(&act(Verb::Open, &[("apple", 12)])));
-        assert!(!typed.contains(&act(Verb::SwitchOn, &[("apple", 12)])));
-        assert!(typed.contains(&act(Verb::PutIn, &[("apple", 12), ("fridge", 10)])));
-        assert!(!typed.contains(&act(Verb::PutIn, &[("fridge", 10), ("apple", 12)])), "a fridge cannot be held");
-        assert!(!typed.contains(&act(Verb::Walk, &[("character", 3)])), "the robot is never an object");
-        let feasible = ActionSet::feasible(&w, &ids);
-        assert_eq!(feasible.len(), w.feasible_actions().len());
-        assert!(feasible.contains(&act(Verb::Walk, &[("apple", 12)])));
-        assert!(!feasible.contains(&act(Verb::Grab, &[("apple", 12)])), "too far");
-        for s in Strength::ALL {
-            let set = ActionSet::build(s, &w, &ids);
-            assert!(!set.is_empty(), "{s}");
-            for lark in [
-                DecomposeGrammar::new(set.clone(), 40).to_lark().unwrap(),
-                VerdictGrammar::new(set.clone(), 40).to_lark().unwrap(),
-                PlanGrammar { actions: set.clone(), max_lines: 8 }.to_lark().unwrap(),
-            ] {
-                assert!(lark.contains("action: "), "{s}: {lark}");
-            }
-        }
-        let sizes: Vec<usize> = Strength::ALL.iter().map(|&s| ActionSet::build(s, &w, &ids).len()).collect();
-        assert!(sizes[0] > sizes[1] && sizes[1] > sizes[2], "format > typed > feasible: {sizes:?}");
-    }
 }

@@ -9,13 +9,12 @@
 //! shares nothing with llguidance, so tests can prove that constrained outputs are what the spec says.
 //!
 //! The planner's decisions use their own grammars ([`decision`]): an [`ActionSet`] at one of three
-//! [`Strength`]s (format, typed by [`affordance`], feasible now), and on it a decomposition proposal
+//! [`Strength`]s (format, typed by `world::affordance`, feasible now), and on it a decomposition proposal
 //! ([`DecomposeGrammar`]), a termination verdict ([`VerdictGrammar`]) and a flat plan
 //! ([`PlanGrammar`]), each with `to_lark` and an independent `parse`. Action lines are read and
 //! written by `crate::action`'s one parser and renderer, in its canonical form.
 
 mod actions;
-pub mod affordance;
 pub mod decision;
 mod lark;
 
@@ -23,9 +22,8 @@ pub use actions::{
     parse_actions, ActionGrammar, Field, FieldKind, GrammarError, ParseError, Parsed, PlanLine, VerbSpec, MAX_LINES,
     MAX_TEXT_CHARS, TEXT_CHARS, TEXT_SLICE,
 };
-pub use affordance::{slot_admits, Need, SlotRequirement};
 pub use decision::{
-    scene_objects, ActionSet, Cause, DecomposeGrammar, PlanGrammar, Proposal, Strength, UnknownStrength, Verdict,
+    ActionSet, Cause, DecomposeGrammar, PlanGrammar, Proposal, Strength, UnknownStrength, Verdict,
     VerdictGrammar, MAX_ALTERNATIVES,
 };
 pub use lark::lark_string;

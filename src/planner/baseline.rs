@@ -151,7 +151,7 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
             Ok(w) => w,
             Err(e) => break e,
         };
-        let set = ActionSet::build(grammar_strength(cfg.strength), world, &req.focus);
+        let set = crate::scene_grammar::action_set(grammar_strength(cfg.strength), world, &req.focus);
         // Draw; a doomed draw is rejected by the symbolic check and drawn again, up to the replan budget.
         let mut chosen = None;
         for _ in 0..=cfg.budgets.max_replans {
@@ -269,7 +269,7 @@ pub fn flat(
                "instruction": req.instruction, "env": env.name()}),
     );
     let max_lines = cfg.budgets.max_actions.clamp(1, 256);
-    let grammar = PlanGrammar { actions: ActionSet::build(strength, world, &req.focus), max_lines };
+    let grammar = PlanGrammar { actions: crate::scene_grammar::action_set(strength, world, &req.focus), max_lines };
     let lark = match grammar.to_lark() {
         Ok(l) => l,
         Err(e) => return finish(tree, vec![], StopCause::Error(format!("plan grammar: {e}")), stats, t0, trace),
@@ -403,7 +403,7 @@ mod tests {
     fn uniform_draw_covers_slot_sets_in_proportion() {
         let w = World::demo();
         let ids: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        let set = ActionSet::build(Strength::Typed, &w, &ids);
+        let set = crate::scene_grammar::action_set(Strength::Typed, &w, &ids);
         let mut rng = StdRng::seed_from_u64(1);
         let mut n_two = 0;
         let draws = 2000;

@@ -159,7 +159,7 @@ impl Run<'_> {
     }
 
     fn action_set(&self) -> Result<ActionSet, StopCause> {
-        Ok(ActionSet::build(self.cfg.strength, self.world()?, &self.focus))
+        Ok(crate::scene_grammar::action_set(self.cfg.strength, self.world()?, &self.focus))
     }
 
     /// The context of a decision at `node`.

@@ -11,6 +11,7 @@
 //! - [`observe`]: the planner's bounded text view and the object catalogue.
 //! - [`demo`]: the embedded demo kitchen (`World::demo()`).
 
+pub mod affordance;
 pub mod demo;
 pub mod exec;
 pub mod feasible;

@@ -1,5 +1,6 @@
 //! What each argument slot of each verb needs from its object: the table behind the `typed` grammar
-//! strength, so that an affordance error (GRAB a sofa, SIT on a fridge) cannot be written.
+//! strength, so that an affordance error (GRAB a sofa, SIT on a fridge) cannot be written. It lives
+//! beside the executor, whose checks it mirrors, so `grammar/` needs nothing of the world.
 //!
 //! The table is derived from what the executor (`world::exec`) checks, and only from that: a
 //! requirement here must hold of every object the executor accepts in that slot, in any state, or a
@@ -8,7 +9,7 @@
 //! like EAI's, does not ask for them. Class exceptions (GRAB water, OPEN a desk) are the executor's own.
 
 use crate::action::Verb;
-use crate::world::{NodeView, Property, Relation, World};
+use super::{NodeView, Property, Relation, World};
 
 /// One thing an object may need.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -121,7 +122,7 @@ pub fn slot_admits(world: &World, verb: Verb, slot: usize, id: u32) -> bool {
 mod tests {
     use super::*;
     use crate::action::{Action, ObjRef};
-    use crate::grammar::ActionSet;
+    use crate::scene_grammar::typed_set;
     use crate::world::FailureKind;
 
     fn all_ids(w: &World) -> Vec<u32> {
@@ -132,7 +133,7 @@ mod tests {
     /// executor refuses for want of an affordance is. Returns how many affordance errors were tried.
     fn check_state(w: &World, what: &str) -> usize {
         let ids = all_ids(w);
-        let typed = ActionSet::typed(w, &ids);
+        let typed = typed_set(w, &ids);
         for a in w.feasible_actions() {
             assert!(typed.contains(&a), "{what}: typed forbids the feasible {a}");
         }
