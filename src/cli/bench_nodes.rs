@@ -158,7 +158,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     let report = NodesReport {
         model: path.display().to_string(),
         planner: a.planner.to_string(),
-        strength: crate::planner::baseline::grammar_strength(a.grammar).to_string(),
+        strength: a.grammar.to_string(),
         tasks: n_tasks,
         by_role,
         per_node: group(&node_refs),

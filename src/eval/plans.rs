@@ -270,7 +270,12 @@ impl PlanEvalReport {
         let proto = cfg.protocol();
         PlanEvalReport {
             planner: cfg.planner.kind.to_string(),
-            strength: crate::planner::baseline::grammar_strength(cfg.planner.strength).to_string(),
+            // The strength the planner really used (flat cannot be feasible-constrained).
+            strength: match cfg.planner.kind {
+                crate::planner::PlannerKind::Flat => crate::planner::baseline::flat_strength(cfg.planner.strength),
+                _ => cfg.planner.strength,
+            }
+            .to_string(),
             protocol: proto,
             protocol_text: proto.to_string(),
             comparable_with_eai_table: proto.comparable_with_eai(),

@@ -22,13 +22,13 @@ use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, Stop
 use crate::action::{Action, ObjRef, Verb};
 use crate::grammar::{ActionSet, PlanGrammar, Strength};
 
-/// The grammar module's strength for the planner's (the same three; the planner's type may become the
-/// grammar's own, and this stays correct).
-pub fn grammar_strength(s: super::Strength) -> Strength {
-    match s {
-        super::Strength::Format => Strength::Format,
-        super::Strength::Typed => Strength::Typed,
-        super::Strength::Feasible => Strength::Feasible,
+/// The strength `flat` really uses: a whole plan is written before anything runs, so only the first
+/// step's preconditions are known and `feasible` cannot constrain it; `typed` is used instead.
+pub fn flat_strength(asked: Strength) -> Strength {
+    if asked == Strength::Feasible {
+        Strength::Typed
+    } else {
+        asked
     }
 }
 use crate::llm::chat::Message;
@@ -132,7 +132,7 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
     trace.event(
         "start",
         json!({"planner": "random", "seed": cfg.random_seed, "actions": cfg.random_actions,
-               "strength": grammar_strength(cfg.strength).to_string(), "instruction": req.instruction, "env": env.name()}),
+               "strength": cfg.strength.to_string(), "instruction": req.instruction, "env": env.name()}),
     );
     let n = cfg.random_actions.min(cfg.budgets.max_actions);
     let stop = loop {
@@ -151,7 +151,7 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
             Ok(w) => w,
             Err(e) => break e,
         };
-        let set = crate::scene_grammar::action_set(grammar_strength(cfg.strength), world, &req.focus);
+        let set = crate::scene_grammar::action_set(cfg.strength, world, &req.focus);
         // Draw; a doomed draw is rejected by the symbolic check and drawn again, up to the replan budget.
         let mut chosen = None;
         for _ in 0..=cfg.budgets.max_replans {
@@ -260,8 +260,8 @@ pub fn flat(
         Ok(w) => w,
         Err(e) => return finish(tree, vec![], e, stats, t0, trace),
     };
-    let asked = grammar_strength(cfg.strength);
-    let strength = if asked == Strength::Feasible { Strength::Typed } else { asked };
+    let asked = cfg.strength;
+    let strength = flat_strength(asked);
     trace.event(
         "start",
         json!({"planner": "flat", "strength": strength.to_string(), "asked_strength": asked.to_string(),
