@@ -287,22 +287,7 @@ pub fn flat(
             return finish(tree, vec![], StopCause::Error(format!("flat generation: {e}")), stats, t0, trace);
         }
     };
-    let mask_ms = g.timings.mask_us.iter().sum::<f64>() / 1e3;
-    let rec = CallRecord {
-        role: "flat",
-        node: root,
-        prompt_hash,
-        output: g.text.clone(),
-        prompt_tokens: g.prompt_tokens,
-        reused_tokens: g.reused_tokens,
-        output_tokens: g.tokens.len(),
-        forced_tokens: g.forced_tokens,
-        prefill_ms: g.timings.prefill_ms,
-        decode_ms: g.timings.decode_ms,
-        mask_ms,
-        total_ms,
-        stop: format!("{:?}", g.stop).to_lowercase(),
-    };
+    let rec = CallRecord::of("flat", root, prompt_hash, &g, total_ms);
     trace.event("llm_call", serde_json::to_value(&rec).unwrap_or_default());
     stats.llm_calls += 1;
     stats.prompt_tokens += rec.prompt_tokens;

@@ -230,6 +230,33 @@ pub struct CallRecord {
     pub stop: String,
 }
 
+impl CallRecord {
+    /// The record of one generation: its tokens and timings as the engine reported them.
+    pub fn of(
+        role: &'static str,
+        node: usize,
+        prompt_hash: String,
+        g: &crate::llm::engine::Generation,
+        total_ms: f64,
+    ) -> CallRecord {
+        CallRecord {
+            role,
+            node,
+            prompt_hash,
+            output: g.text.clone(),
+            prompt_tokens: g.prompt_tokens,
+            reused_tokens: g.reused_tokens,
+            output_tokens: g.tokens.len(),
+            forced_tokens: g.forced_tokens,
+            prefill_ms: g.timings.prefill_ms,
+            decode_ms: g.timings.decode_ms,
+            mask_ms: g.timings.mask_us.iter().sum::<f64>() / 1e3,
+            total_ms,
+            stop: format!("{:?}", g.stop).to_lowercase(),
+        }
+    }
+}
+
 /// Counters of one run.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct PlanStats {

@@ -235,21 +235,7 @@ impl Run<'_> {
                 "{role} call at node {node}: the model's context filled before the answer was complete"
             )));
         }
-        let rec = CallRecord {
-            role,
-            node,
-            prompt_hash: hash,
-            output: g.text.clone(),
-            prompt_tokens: g.prompt_tokens,
-            reused_tokens: g.reused_tokens,
-            output_tokens: g.tokens.len(),
-            forced_tokens: g.forced_tokens,
-            prefill_ms: g.timings.prefill_ms,
-            decode_ms: g.timings.decode_ms,
-            mask_ms: g.timings.mask_us.iter().sum::<f64>() / 1e3,
-            total_ms,
-            stop: format!("{:?}", g.stop).to_lowercase(),
-        };
+        let rec = CallRecord::of(role, node, hash, &g, total_ms);
         self.stats.prompt_tokens += rec.prompt_tokens;
         self.stats.reused_tokens += rec.reused_tokens;
         self.stats.output_tokens += rec.output_tokens;
