@@ -19,7 +19,7 @@ use std::sync::Arc;
 use candle_core::Device;
 
 use super::gguf::{Arch, GgufFile};
-use super::kernels::{dot_f32, matmul, matmul_many, pool, Q8Acts, QMatrix, SendPtr};
+use super::kernels::{dot_f32, matmul, matmul_many, pool, Kernel, Q8Acts, QMatrix, SendPtr};
 use super::{LlmError, Result};
 
 /// Hyper-parameters read from the GGUF metadata (`<arch>.*` keys).
@@ -335,37 +335,82 @@ impl Layer {
         let out = SendPtr(att.as_mut_ptr());
         let (keys, values, q) = (&self.cache.k[..kv_len * kvw], &self.cache.v[..kv_len * kvw], &*q);
         let scale = 1.0 / (hd as f32).sqrt();
+        let kernel = Kernel::detect();
         let task = |task: usize| {
             let (head, qb) = (task % nh, task / nh);
-            let kvh = head / group;
             // SAFETY: each task owns its row of `scores` and the (query, head) slices of `att` it
             // writes; both buffers outlive the pool job.
             let sc = unsafe { std::slice::from_raw_parts_mut(scores.get().add(task * kv_len), kv_len) };
-            for i in qb * qblock..((qb + 1) * qblock).min(t) {
-                let qi = &q[(i * nh + head) * hd..][..hd];
-                let seen = pos + i + 1; // causal: keys 0..=pos+i
-                let mut max = f32::NEG_INFINITY;
-                for (j, sj) in sc[..seen].iter_mut().enumerate() {
-                    *sj = dot_f32(qi, &keys[j * kvw + kvh * hd..][..hd]) * scale;
-                    max = max.max(*sj);
-                }
-                let mut sum = 0f32;
-                for sj in &mut sc[..seen] {
-                    *sj = (*sj - max).exp();
-                    sum += *sj;
-                }
-                let y = unsafe { std::slice::from_raw_parts_mut(out.get().add((i * nh + head) * hd), hd) };
-                for (j, &p) in sc[..seen].iter().enumerate() {
-                    let p = p / sum;
-                    for (yo, &vv) in y.iter_mut().zip(&values[j * kvw + kvh * hd..][..hd]) {
-                        *yo += p * vv;
-                    }
-                }
+            let job = HeadBlock { q, keys, values, head, kvh: head / group, nh, kvw, hd, pos, scale, out: &out };
+            let rows = qb * qblock..((qb + 1) * qblock).min(t);
+            match kernel {
+                // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
+                Kernel::Avx2 => unsafe { job.run_avx2(rows, sc) },
+                Kernel::Scalar => job.run(rows, sc),
             }
         };
         pool::global().run(n_tasks, &task);
         let o = fit(&mut s.o, t * cfg.n_embd);
         matmul(&self.wo, att, t, &mut s.q8, o);
+    }
+}
+
+/// One attention head over a block of query rows: scores against every cached key up to each
+/// query's own position (causal), softmax, weighted sum of the values, written into `out`.
+struct HeadBlock<'a> {
+    q: &'a [f32],
+    keys: &'a [f32],
+    values: &'a [f32],
+    head: usize,
+    kvh: usize,
+    nh: usize,
+    kvw: usize,
+    hd: usize,
+    pos: usize,
+    scale: f32,
+    out: &'a SendPtr,
+}
+
+impl HeadBlock<'_> {
+    /// The same code compiled for AVX2/FMA, so the float loops use 256-bit vectors; the sums keep
+    /// their fixed order (`dot_f32` has eight lanes either way), so both paths give the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn run_avx2(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+        self.run(rows, sc)
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    unsafe fn run_avx2(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+        self.run(rows, sc)
+    }
+
+    #[inline(always)]
+    fn run(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+        let (hd, kvw, kvh) = (self.hd, self.kvw, self.kvh);
+        for i in rows {
+            let qi = &self.q[(i * self.nh + self.head) * hd..][..hd];
+            let seen = self.pos + i + 1; // causal: keys 0..=pos+i
+            let mut max = f32::NEG_INFINITY;
+            for (j, sj) in sc[..seen].iter_mut().enumerate() {
+                *sj = dot_f32(qi, &self.keys[j * kvw + kvh * hd..][..hd]) * self.scale;
+                max = max.max(*sj);
+            }
+            let mut sum = 0f32;
+            for sj in &mut sc[..seen] {
+                *sj = (*sj - max).exp();
+                sum += *sj;
+            }
+            // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
+            let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * self.nh + self.head) * hd), hd) };
+            let inv = 1.0 / sum;
+            for (j, &p) in sc[..seen].iter().enumerate() {
+                let p = p * inv;
+                for (yo, &vv) in y.iter_mut().zip(&self.values[j * kvw + kvh * hd..][..hd]) {
+                    *yo += p * vv;
+                }
+            }
+        }
     }
 }
 

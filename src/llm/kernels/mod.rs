@@ -253,6 +253,7 @@ fn dot<const NT: usize>(kernel: Kernel, fmt: Format, w: &[u8], a: &[&[Q8Block]; 
 }
 
 /// A float dot product with eight independent partial sums (vectorisable, fixed order).
+#[inline(always)]
 pub fn dot_f32(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0f32; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
