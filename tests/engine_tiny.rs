@@ -182,3 +182,37 @@ fn a_full_context_stops_with_the_text_so_far() {
     let err = e.generate(&long, None, &opts).err().unwrap();
     assert!(matches!(err, LlmError::PromptTooLong { context: 24, .. }), "{err}");
 }
+
+#[test]
+fn scoring_a_list_shares_work_but_gives_each_line_its_own_score() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines: Vec<String> = ["action: [WALK] <apple> (12)", "action: [WALK] <fridge> (5)", "action: [GRAB] <apple> (12)", "done"]
+        .map(String::from)
+        .to_vec();
+    for spec in [TinySpec::llama(), TinySpec::qwen2()] {
+        let path = tiny(spec, &dir);
+        let prompt = chat("put the apple in the fridge");
+        let mut together = Engine::load(&path).unwrap();
+        let all = together.score(&prompt, &lines).unwrap();
+        assert_eq!(all.scores.len(), lines.len());
+        // Shared beginnings ran once: fewer tokens than the lines have between them.
+        let total: usize = all.scores.iter().map(|s| s.tokens).sum();
+        assert!(all.run_tokens < total, "{} run of {total}", all.run_tokens);
+        for (i, line) in lines.iter().enumerate() {
+            let mut alone = Engine::load(&path).unwrap();
+            let one = alone.score(&prompt, std::slice::from_ref(line)).unwrap().scores[0];
+            let s = all.scores[i];
+            assert_eq!(s.tokens, one.tokens, "{line}");
+            assert!((s.logprob - one.logprob).abs() < 1e-3, "{line}: {} together, {} alone", s.logprob, one.logprob);
+            assert!(s.logprob < 0.0 && s.logprob.is_finite(), "{line}: {}", s.logprob);
+        }
+        // A generation after scoring is the same as on a fresh engine (the cache stays consistent).
+        let opts = GenOptions { max_tokens: 8, ..Default::default() };
+        let after = together.generate(&prompt, None, &opts).unwrap();
+        let fresh = Engine::load(&path).unwrap().generate(&prompt, None, &opts).unwrap();
+        assert_eq!(after.tokens, fresh.tokens);
+        // An empty continuation is an error that says what to do.
+        let err = together.score(&prompt, &[String::new()]).unwrap_err().to_string();
+        assert!(err.contains("empty"), "{err}");
+    }
+}

@@ -8,7 +8,7 @@ use serde_json::Value;
 use step::llm::engine::Engine;
 use step::llm::tiny::{write_tiny_gguf, TinySpec};
 use step::planner::replay::{compare, read_trace};
-use step::planner::{plan, Budgets, PlanRequest, PlannerConfig, PlannerKind, SimEnv, StopCause, Strength, TraceWriter};
+use step::planner::{plan, ActionChoice, Budgets, PlanRequest, PlannerConfig, PlannerKind, SimEnv, StopCause, Strength, TraceWriter};
 use step::world::World;
 
 fn tiny(mut spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
@@ -31,12 +31,15 @@ fn random_weight_models_always_end_with_parsed_outputs_and_replay_identically() 
         (TinySpec::qwen2(), PlannerKind::Step, Strength::Feasible),
         (TinySpec::llama().with_seed(7), PlannerKind::NoTree, Strength::Format),
         (TinySpec::qwen2().with_seed(5), PlannerKind::NoSubgoalTree, Strength::Typed),
+        // Actions chosen by likelihood over the feasible set (the trace holds the score calls).
+        (TinySpec::llama().with_seed(3), PlannerKind::Step, Strength::Feasible),
     ];
-    for (spec, kind, strength) in cases {
+    for (i, (spec, kind, strength)) in cases.into_iter().enumerate() {
         let model = tiny(spec, &dir);
-        let cfg = PlannerConfig { kind, strength, budgets: small_budgets(), ..PlannerConfig::default() };
+        let choose = if i == 4 { ActionChoice::Score } else { ActionChoice::Generate };
+        let cfg = PlannerConfig { kind, strength, budgets: small_budgets(), choose, ..PlannerConfig::default() };
         let req = PlanRequest::new("put the apple in the fridge", vec![]);
-        let trace_path = dir.path().join(format!("{kind}-{strength:?}.jsonl"));
+        let trace_path = dir.path().join(format!("{i}-{kind}-{strength:?}.jsonl"));
         let mut trace = TraceWriter::create(&trace_path).unwrap();
         let mut engine = Engine::load(&model).unwrap();
         let mut env = SimEnv::new(World::demo(), vec![]);
@@ -44,6 +47,9 @@ fn random_weight_models_always_end_with_parsed_outputs_and_replay_identically() 
         let label = format!("{} {kind} {strength:?}", model.display());
         assert!(!matches!(out.stop, StopCause::Error(_)), "{label}: {:?}", out.stop);
         assert!(out.stats.llm_calls <= 14, "{label}");
+        if choose == ActionChoice::Score {
+            assert!(out.stats.calls.iter().any(|c| c.role == "score"), "{label}: no action was scored");
+        }
         assert_eq!(out.tree.plan(), out.executed, "{label}");
 
         // The trace: header first, end last, every call, every node, every executed action.

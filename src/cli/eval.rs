@@ -79,6 +79,17 @@ pub struct PlanArgs {
     /// Turn off the symbolic check of execute verdicts (on by default).
     #[arg(long)]
     pub no_symbolic_check: bool,
+    /// Ask the termination model about actions the world already found runnable (congruence only).
+    #[arg(long)]
+    pub judge_actions: bool,
+    /// Offer every feasible step (by default a walk right after a walk, and the last three actions,
+    /// are not offered again when anything else can be done; the random planner obeys the same rule).
+    #[arg(long)]
+    pub allow_repeats: bool,
+    /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
+    /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
+    #[arg(long, default_value = "generate")]
+    pub choose: crate::planner::ActionChoice,
     /// Write one JSON-lines trace per task here (<id>.jsonl).
     #[arg(long, value_name = "DIR")]
     pub trace_dir: Option<PathBuf>,
@@ -158,6 +169,9 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             symbolic_check: !a.no_symbolic_check,
             random_seed: a.seed,
             random_actions: a.random_actions,
+            judge_actions: a.judge_actions,
+            fresh_steps: !a.allow_repeats,
+            choose: a.choose,
             ..defaults
         },
         seen: a.protocol,

@@ -74,6 +74,17 @@ pub struct PlanArgs {
     /// Do not check execute verdicts against the world before executing them.
     #[arg(long)]
     pub no_symbolic_check: bool,
+    /// Ask the termination model about actions the world already found runnable (congruence only).
+    #[arg(long)]
+    pub judge_actions: bool,
+    /// Offer every feasible step (by default a walk right after a walk, and the last three actions,
+    /// are not offered again when anything else can be done; the random planner obeys the same rule).
+    #[arg(long)]
+    pub allow_repeats: bool,
+    /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
+    /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
+    #[arg(long, default_value = "generate")]
+    pub choose: crate::planner::ActionChoice,
     /// Most tokens per model answer.
     #[arg(long, default_value_t = PlannerConfig::default().gen.max_tokens)]
     pub max_tokens: usize,
@@ -225,6 +236,9 @@ fn config(args: &PlanArgs) -> anyhow::Result<PlannerConfig> {
         },
         symbolic_check: !args.no_symbolic_check,
         oracle_stop: args.oracle_stop,
+        judge_actions: args.judge_actions,
+        fresh_steps: !args.allow_repeats,
+        choose: args.choose,
         ..PlannerConfig::default()
     };
     if args.max_depth == 0 {

@@ -101,9 +101,42 @@ fn per_second(n: usize, ms: f64) -> f64 {
     }
 }
 
-/// The one call the planner makes of a model.
+/// How likely one continuation is after a prompt.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Score {
+    /// Natural-log probability of the continuation's tokens, summed.
+    pub logprob: f64,
+    pub tokens: usize,
+}
+
+impl Score {
+    /// Log probability per token: comparable across continuations of different lengths.
+    pub fn mean(&self) -> f64 {
+        self.logprob / self.tokens.max(1) as f64
+    }
+}
+
+/// The scores of a list of continuations, in the order given, with what they cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct Scoring {
+    pub scores: Vec<Score>,
+    pub prompt_tokens: usize,
+    pub reused_tokens: usize,
+    /// Continuation tokens the model ran (shared beginnings run once).
+    pub run_tokens: usize,
+    pub ms: f64,
+}
+
+/// The calls the planner makes of a model: generate under a grammar, or rank a closed list of
+/// continuations by likelihood (a choice among known options, exact by construction).
 pub trait Generate {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation>;
+
+    /// The log likelihood of each of `continuations` right after `prompt` (where the reply begins).
+    fn score(&mut self, prompt: &Prompt, continuations: &[String]) -> Result<Scoring> {
+        let _ = (prompt, continuations);
+        Err(LlmError::Decode("this model cannot score continuations; choose by generation".into()))
+    }
 }
 
 /// A loaded model with its tokenizer, chat template, grammar compiler and KV cache.
@@ -210,6 +243,81 @@ impl Engine {
 impl Generate for Engine {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation> {
         self.generate_streaming(prompt, grammar, opts, None)
+    }
+
+    /// Runs the prompt once (reusing the cached prefix), then each continuation after it. The
+    /// continuations are visited in token order, so one that starts like the previous one reuses
+    /// those positions and their log probabilities, and only its own tail runs.
+    fn score(&mut self, prompt: &Prompt, continuations: &[String]) -> Result<Scoring> {
+        let t0 = Instant::now();
+        let text = self.render(prompt)?;
+        let prompt_ids = self.tokenizer.encode(&text)?;
+        if prompt_ids.is_empty() {
+            return Err(LlmError::Decode("the prompt is empty".into()));
+        }
+        let context = self.model.config().context_length;
+        let mut conts = Vec::with_capacity(continuations.len());
+        for c in continuations {
+            let full = self.tokenizer.encode(&format!("{text}{c}"))?;
+            // The prompt must tokenize the same on its own and before the continuation, or the
+            // continuation's tokens are not the ones the model would write after it.
+            if !full.starts_with(&prompt_ids) || full.len() == prompt_ids.len() {
+                return Err(LlmError::Decode(format!(
+                    "the continuation {c:?} is empty or merges into the prompt's last token when tokenized; \
+                     end the prompt at a token boundary (a newline) or start the continuation with one"
+                )));
+            }
+            if full.len() > context {
+                return Err(LlmError::PromptTooLong { prompt_tokens: full.len(), context });
+            }
+            conts.push(full[prompt_ids.len()..].to_vec());
+        }
+        let (after_prompt, reused) = self.prefill(&prompt_ids, true)?;
+        let base = prompt_ids.len();
+        let first = log_softmax_at(&after_prompt, None);
+        let mut order: Vec<usize> = (0..conts.len()).collect();
+        order.sort_by(|&a, &b| conts[a].cmp(&conts[b]));
+        let mut scores = vec![Score { logprob: 0.0, tokens: 0 }; conts.len()];
+        let (mut prev, mut prev_lp): (Vec<u32>, Vec<f64>) = (Vec::new(), Vec::new());
+        let mut run_tokens = 0;
+        for i in order {
+            let c = &conts[i];
+            let n = c.len();
+            let shared = common_prefix(&prev, c);
+            let mut lp = Vec::with_capacity(n);
+            lp.push(first[c[0] as usize]);
+            // Positions 1..shared had the same context and token in the previous continuation.
+            lp.extend_from_slice(&prev_lp[1.min(shared)..shared.min(n)]);
+            if lp.len() < n {
+                // Logits after c[j-1] are needed for j = lp.len()..n: run c[j-1..n-1] after
+                // the prompt and c[..j-1] (which stay cached).
+                let j = lp.len();
+                self.model.truncate(base + j - 1);
+                self.cached.truncate(base + j - 1);
+                let run = &c[j - 1..n - 1];
+                let rows = self.model.forward_all(run)?;
+                self.cached.extend_from_slice(run);
+                run_tokens += run.len();
+                let v = self.model.config().n_vocab;
+                for (k, row) in rows.chunks_exact(v).enumerate() {
+                    lp.push(log_softmax_at(row, Some(c[j + k]))[0]);
+                }
+            }
+            scores[i] = Score { logprob: lp.iter().sum(), tokens: n };
+            prev = c.clone();
+            prev_lp = lp;
+        }
+        Ok(Scoring { scores, prompt_tokens: base, reused_tokens: reused, run_tokens, ms: ms(t0) })
+    }
+}
+
+/// log softmax of `logits`: at one token (a one-element vector), or at every token.
+fn log_softmax_at(logits: &[f32], at: Option<u32>) -> Vec<f64> {
+    let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max) as f64;
+    let lse = max + logits.iter().map(|&x| (x as f64 - max).exp()).sum::<f64>().ln();
+    match at {
+        Some(t) => vec![logits[t as usize] as f64 - lse],
+        None => logits.iter().map(|&x| x as f64 - lse).collect(),
     }
 }
 

@@ -239,6 +239,16 @@ impl Transformer {
     /// Runs `tokens` at positions `cached_len()..`, appends them to the cache and returns the
     /// next-token logits after the last one (length `n_vocab`).
     pub fn forward(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
+        self.forward_rows(tokens, false)
+    }
+
+    /// As [`Transformer::forward`], returning the next-token logits after every one of `tokens`
+    /// (`tokens.len() × n_vocab`, row by row): what scoring a continuation needs.
+    pub fn forward_all(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
+        self.forward_rows(tokens, true)
+    }
+
+    fn forward_rows(&mut self, tokens: &[u32], all: bool) -> Result<Vec<f32>> {
         let t = tokens.len();
         if t == 0 {
             return Err(LlmError::Decode("forward called with no tokens".into()));
@@ -285,12 +295,12 @@ impl Transformer {
             matmul(&layer.down, g, t, &mut s.q8, o);
             add(x, o);
         }
-        // Only the last position's logits are ever used: project that row alone.
-        let last = &x[(t - 1) * d..];
-        let h = fit(&mut h_buf, d);
-        rms_norm(last, &self.out_norm, eps, h);
-        let mut logits = vec![0f32; cfg.n_vocab];
-        matmul(&self.output, h, 1, &mut s.q8, &mut logits);
+        // Generation uses the last position's logits only: project that row alone.
+        let rows = if all { t } else { 1 };
+        let h = fit(&mut h_buf, rows * d);
+        rms_norm(&x[(t - rows) * d..], &self.out_norm, eps, h);
+        let mut logits = vec![0f32; rows * cfg.n_vocab];
+        matmul(&self.output, h, rows, &mut s.q8, &mut logits);
         (s.x, s.h) = (x_buf, h_buf);
         Ok(logits)
     }

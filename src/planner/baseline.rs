@@ -151,7 +151,12 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
             Ok(w) => w,
             Err(e) => break e,
         };
-        let set = crate::scene_grammar::action_set(cfg.strength, world, &req.focus);
+        let set = match crate::scene_grammar::action_set(cfg.strength, world, &req.focus) {
+            ActionSet::Exact(list) if cfg.fresh_steps => {
+                ActionSet::Exact(crate::planner::planner::fresh_steps(list, &executed, &executed))
+            }
+            set => set,
+        };
         // Draw; a doomed draw is rejected by the symbolic check and drawn again, up to the replan budget.
         let mut chosen = None;
         for _ in 0..=cfg.budgets.max_replans {

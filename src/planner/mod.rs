@@ -158,6 +158,15 @@ pub struct PlannerConfig {
     pub random_actions: usize,
     /// DIAGNOSTIC ONLY: stop when `PlanRequest::oracle` says the goal holds (see there).
     pub oracle_stop: bool,
+    /// Ask the termination model about an action the symbolic check already found runnable (it can
+    /// then only reject it for congruence). Off: the world's check is the verdict on actions, and the
+    /// model judges subgoals only.
+    pub judge_actions: bool,
+    /// Drop steps that repeat recent ones (see [`planner::fresh_steps`]; exact action sets only;
+    /// the random planner obeys it too).
+    pub fresh_steps: bool,
+    /// How a proposed action is chosen once the model has said it proposes one.
+    pub choose: ActionChoice,
     /// Bytes of the observation shown in each prompt.
     pub observe_budget: usize,
     /// Longest subgoal text a decomposition may write.
@@ -177,9 +186,44 @@ impl Default for PlannerConfig {
             random_seed: 0,
             random_actions: 30,
             oracle_stop: false,
+            judge_actions: false,
+            fresh_steps: true,
+            choose: ActionChoice::Generate,
             observe_budget: 600,
             subgoal_chars: 40,
             reason_chars: 48,
+        }
+    }
+}
+
+/// How the planner picks the action of an `action:` proposal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ActionChoice {
+    /// The action the model wrote, greedily, token by token under the grammar.
+    Generate,
+    /// The most likely (per token) of every action the grammar admits, scored whole after the
+    /// same prompt: a token-by-token greedy choice commits to a verb before seeing the objects,
+    /// a whole-line score does not. Needs an exact action set (`feasible`); else as `Generate`.
+    Score,
+}
+
+impl ActionChoice {
+    pub fn name(self) -> &'static str {
+        match self {
+            ActionChoice::Generate => "generate",
+            ActionChoice::Score => "score",
+        }
+    }
+}
+
+impl std::str::FromStr for ActionChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "generate" => Ok(ActionChoice::Generate),
+            "score" => Ok(ActionChoice::Score),
+            _ => Err(format!("unknown action choice '{s}': choose generate or score")),
         }
     }
 }
@@ -231,6 +275,31 @@ pub struct CallRecord {
 }
 
 impl CallRecord {
+    /// The record of one scoring pass that chose `chosen` among the candidates.
+    pub fn of_scoring(
+        node: usize,
+        prompt_hash: String,
+        s: &crate::llm::engine::Scoring,
+        chosen: &str,
+        total_ms: f64,
+    ) -> CallRecord {
+        CallRecord {
+            role: "score",
+            node,
+            prompt_hash,
+            output: chosen.to_string(),
+            prompt_tokens: s.prompt_tokens,
+            reused_tokens: s.reused_tokens,
+            output_tokens: s.run_tokens,
+            forced_tokens: 0,
+            prefill_ms: s.ms,
+            decode_ms: 0.0,
+            mask_ms: 0.0,
+            total_ms,
+            stop: "scored".into(),
+        }
+    }
+
     /// The record of one generation: its tokens and timings as the engine reported them.
     pub fn of(
         role: &'static str,
@@ -312,6 +381,9 @@ impl PlannerConfig {
             "random_seed": self.random_seed,
             "random_actions": self.random_actions,
             "oracle_stop": self.oracle_stop,
+            "judge_actions": self.judge_actions,
+            "fresh_steps": self.fresh_steps,
+            "choose": self.choose.name(),
             "observe_budget": self.observe_budget,
             "subgoal_chars": self.subgoal_chars,
             "reason_chars": self.reason_chars,
@@ -368,6 +440,13 @@ impl PlannerConfig {
         if let Some(x) = v.get("oracle_stop").and_then(Value::as_bool) {
             c.oracle_stop = x;
         }
+        // Traces written before these settings existed ran with them as shown.
+        c.judge_actions = v.get("judge_actions").and_then(Value::as_bool).unwrap_or(true);
+        c.fresh_steps = v.get("fresh_steps").and_then(Value::as_bool).unwrap_or(false);
+        c.choose = match v.get("choose").and_then(Value::as_str) {
+            None => ActionChoice::Generate,
+            Some(s) => s.parse()?,
+        };
         if let Some(n) = usize_of(v, "observe_budget")? {
             c.observe_budget = n;
         }

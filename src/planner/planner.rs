@@ -19,9 +19,9 @@ use crate::grammar::{ActionSet, Cause, DecomposeGrammar, Proposal, Verdict, Verd
 use super::prompt::{NodeView, Prompter};
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
-use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
+use super::{ActionChoice, CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
 use crate::action::Action;
-use crate::llm::engine::{Generate, Prompt, StopReason};
+use crate::llm::engine::{Generate, Prompt, Score, StopReason};
 use crate::llm::LlmError;
 use crate::world::World;
 
@@ -246,6 +246,45 @@ impl Run<'_> {
         Ok(Some(g.text))
     }
 
+    /// The action of an `action:` proposal chosen by likelihood: every action of an exact set is
+    /// scored whole as the proposal line, and the best per token wins (the first on a tie). Other
+    /// sets, or a single choice, keep the `written` action.
+    fn rank(&mut self, node: NodeId, prompt: &Prompt, set: &ActionSet, written: Action) -> Result<Action, StopCause> {
+        let ActionSet::Exact(list) = set else { return Ok(written) };
+        if list.len() < 2 {
+            return Ok(written);
+        }
+        self.check_global()?;
+        let lines: Vec<String> = list.iter().map(|a| format!("action: {a}")).collect();
+        let hash = prompt_hash(prompt, &lines.join("\n"));
+        let t = Instant::now();
+        let scoring = self.model.score(prompt, &lines).map_err(|e| {
+            self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
+                "kind": "error", "error": e.to_string()}));
+            StopCause::Error(format!("score call at node {node}: {e}"))
+        })?;
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        let mut best = 0;
+        for (i, s) in scoring.scores.iter().enumerate() {
+            if s.mean() > scoring.scores[best].mean() {
+                best = i;
+            }
+        }
+        let rec = CallRecord::of_scoring(node, hash, &scoring, &lines[best], total_ms);
+        self.stats.prompt_tokens += rec.prompt_tokens;
+        self.stats.reused_tokens += rec.reused_tokens;
+        self.stats.output_tokens += rec.output_tokens;
+        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(Score::mean).zip(lines.iter().map(String::as_str)).collect();
+        top.sort_by(|a, b| b.0.total_cmp(&a.0));
+        self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
+        self.trace.event("scores", json!({"node": node, "written": format!("action: {written}"),
+            "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
+        self.tree.add_call(node, self.stats.calls.len());
+        self.stats.calls.push(rec);
+        Ok(list[best].clone())
+    }
+
     /// Expands `node` until the model says `done` for it or a per-node budget abandons it.
     fn expand(&mut self, node: NodeId) -> Result<End, StopCause> {
         let depth = self.tree.node(node).depth;
@@ -254,29 +293,43 @@ impl Run<'_> {
         let mut previous: Option<String> = None;
         let mut rejected: Option<String> = None;
         let mut refused: Vec<Action> = Vec::new();
-        let mut last_done: Option<Action> = None;
+        // Actions this node has executed, in order.
+        let mut done_here: Vec<Action> = Vec::new();
         let mut replans = 0usize;
         let mut children = 0usize;
         let mut accepted = 0usize;
+        // After a subgoal of this node is rejected, given up or echoes the node's own goal, the node
+        // proposes actions only until one runs: a greedy model otherwise writes the same subgoal again.
+        let mut concrete_only = false;
+        // The root is bounded by the run's budgets (calls, actions, deadline) alone: abandoning it
+        // ends the run, and a plan needs more steps than a subgoal.
+        let is_root = node == self.tree.root();
         loop {
-            if replans > budgets.max_replans {
+            if !is_root && replans > budgets.max_replans {
                 return Ok(End::Abandoned("replans"));
             }
-            if children >= budgets.max_children {
+            if !is_root && children >= budgets.max_children {
                 return Ok(End::Abandoned("children"));
             }
             self.check_global()?;
             let view = self.view(node, previous.as_deref(), rejected.as_deref());
-            // An action this node has just rejected is not proposed again until the state changes,
-            // nor the action it has just executed (a greedy tiny model otherwise repeats one step
-            // forever); only exact sets can drop one.
+            // An action this node has just rejected is not proposed again until the state changes;
+            // only exact sets can drop one. With `fresh_steps`, steps that repeat recent ones are
+            // dropped too; without, at least the action the node has just executed (a greedy tiny
+            // model otherwise repeats one step forever).
             let actions = match self.action_set()? {
-                ActionSet::Exact(list) if !refused.is_empty() || last_done.is_some() => ActionSet::Exact(
-                    list.into_iter().filter(|a| !refused.contains(a) && last_done.as_ref() != Some(a)).collect(),
-                ),
+                ActionSet::Exact(list) => {
+                    let list: Vec<Action> = list.into_iter().filter(|a| !refused.contains(a)).collect();
+                    ActionSet::Exact(if self.cfg.fresh_steps {
+                        fresh_steps(list, &self.executed, &done_here)
+                    } else {
+                        list.into_iter().filter(|a| done_here.last() != Some(a)).collect()
+                    })
+                }
                 set => set,
             };
-            let allow_subgoal = self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth;
+            let allow_subgoal =
+                self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth && !concrete_only;
             // `done` before any step would end a goal with nothing done; it is offered once a child
             // has been accepted (or when nothing else can be written).
             let allow_done = accepted > 0 || (!allow_subgoal && actions.is_empty());
@@ -290,6 +343,12 @@ impl Run<'_> {
                 continue;
             };
             let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e.to_string()))?;
+            let proposal = match proposal {
+                Proposal::Action(a) if self.cfg.choose == ActionChoice::Score => {
+                    Proposal::Action(self.rank(node, &prompt, &dg.actions, a)?)
+                }
+                p => p,
+            };
             let (child_text, child_action) = match &proposal {
                 Proposal::Done => return Ok(End::Complete),
                 Proposal::Subgoal(s) => (s.clone(), None),
@@ -298,6 +357,39 @@ impl Run<'_> {
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
             children += 1;
             self.node_event(child);
+            if child_action.is_none() && echoes(&child_text, &self.tree.node(node).text) {
+                self.set_status(child, Status::Replanned, "congruence: it repeats its parent's goal");
+                replans += 1;
+                self.stats.replans += 1;
+                concrete_only = true;
+                rejected = Some(format!("{child_text}: it repeats the goal; give one action"));
+                continue;
+            }
+            // With the symbolic checks on, the world decides whether a proposed action can run now
+            // (affordance and environment): a runnable one is executed without asking the model,
+            // a doomed one is rejected with the executor's reason. The model is asked about an action
+            // only for congruence, and only with `judge_actions` (a tiny model's congruence verdicts
+            // were found to reject nearly every action, copying the prompt's text as the reason).
+            if let (Some(a), true, false) = (&child_action, self.cfg.symbolic_check, self.cfg.judge_actions) {
+                self.set_status(child, Status::Mapped { action: a.clone() }, "an action (the world checks it)");
+                match self.execute(child, a)? {
+                    Ok(summary) => {
+                        refused.clear();
+                        done_here.push(a.clone());
+                        accepted += 1;
+                        concrete_only = false;
+                        previous = Some(format!("{child_text}: {summary}"));
+                        rejected = None;
+                    }
+                    Err(reason) => {
+                        refused.push(a.clone());
+                        replans += 1;
+                        self.stats.replans += 1;
+                        rejected = Some(rejection(&child_text, &reason));
+                    }
+                }
+                continue;
+            }
 
             // The verdict on the new child. A proposed action can only be executed or rejected, so
             // its grammar names that one action (the verdict is mostly forced tokens, still the
@@ -336,6 +428,7 @@ impl Run<'_> {
             match verdict {
                 Verdict::Replan { cause, reason } => {
                     refused.extend(child_action.clone());
+                    concrete_only |= child_action.is_none();
                     self.set_status(child, Status::Replanned, format!("{cause}: {reason}"));
                     replans += 1;
                     self.stats.replans += 1;
@@ -364,6 +457,7 @@ impl Run<'_> {
                             // The parent goes on, told that this step was given up; it counts as a
                             // rejected attempt so a parent cannot abandon children forever.
                             replans += 1;
+                            concrete_only = true;
                             previous = Some(format!("{child_text}: given up"));
                             rejected = None;
                         }
@@ -374,8 +468,9 @@ impl Run<'_> {
                     match self.execute(child, &a)? {
                         Ok(summary) => {
                             refused.clear();
-                            last_done = Some(a.clone());
+                            done_here.push(a.clone());
                             accepted += 1;
+                            concrete_only = false;
                             previous = Some(format!("{child_text}: {summary}"));
                             rejected = None;
                         }
@@ -442,6 +537,42 @@ impl Run<'_> {
         Ok(r)
     }
 }
+
+/// Whether a proposed subgoal only repeats its parent's goal (the same words, or the start of them):
+/// decomposing it would make the same decision one level down.
+fn echoes(subgoal: &str, goal: &str) -> bool {
+    let words = |s: &str| -> Vec<String> {
+        s.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).map(str::to_lowercase).collect()
+    };
+    let (s, g) = (words(subgoal), words(goal));
+    !s.is_empty() && (g.starts_with(&s) || s.starts_with(&g))
+}
+
+/// The choices without the steps that repeat earlier ones, when anything else can be done: a walk
+/// (or run) right after one (the first was pointless), any of the run's last [`RECENT`] actions, and
+/// any action the node has already executed (`done_here`): the STEP context shows a node only its
+/// previous step, so a greedy model that comes back to a state it has seen makes the same choice
+/// again and cycles. The embodiment's rule, not a task's; every planner that chooses actions one at a
+/// time obeys it, the random one included, so figures stay comparable.
+pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[Action]) -> Vec<Action> {
+    use crate::action::Verb;
+    let moves = |a: &Action| matches!(a.verb, Verb::Walk | Verb::Run);
+    let after_move = executed.last().is_some_and(moves);
+    let recent = &executed[executed.len().saturating_sub(RECENT)..];
+    let fresh: Vec<Action> = list
+        .iter()
+        .filter(|a| !(after_move && moves(a)) && !recent.contains(a) && !done_here.contains(a))
+        .cloned()
+        .collect();
+    if fresh.is_empty() {
+        list
+    } else {
+        fresh
+    }
+}
+
+/// How many of the run's latest actions [`fresh_steps`] keeps from being chosen again.
+pub const RECENT: usize = 3;
 
 /// "step: why", without repeating the step when the reason already names it (executor messages do).
 fn rejection(step: &str, reason: &str) -> String {

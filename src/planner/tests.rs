@@ -13,11 +13,20 @@ struct Scripted {
     answers: VecDeque<Result<String, LlmError>>,
     prompts: Vec<String>,
     grammars: Vec<String>,
+    /// Scoring: this line is the likeliest (-0.1 a token), every other -1.0 a token.
+    prefer: Option<String>,
+    scored: Vec<Vec<String>>,
 }
 
 impl Scripted {
     fn new(answers: &[&str]) -> Scripted {
-        Scripted { answers: answers.iter().map(|s| Ok(s.to_string())).collect(), prompts: vec![], grammars: vec![] }
+        Scripted {
+            answers: answers.iter().map(|s| Ok(s.to_string())).collect(),
+            prompts: vec![],
+            grammars: vec![],
+            prefer: None,
+            scored: vec![],
+        }
     }
 }
 
@@ -56,13 +65,27 @@ impl Generate for Scripted {
             timings: Timings::default(),
         })
     }
+
+    fn score(&mut self, _: &Prompt, continuations: &[String]) -> crate::llm::Result<crate::llm::engine::Scoring> {
+        self.scored.push(continuations.to_vec());
+        let scores = continuations
+            .iter()
+            .map(|c| {
+                let per = if self.prefer.as_deref() == Some(c.as_str()) { -0.1 } else { -1.0 };
+                crate::llm::engine::Score { logprob: per * 5.0, tokens: 5 }
+            })
+            .collect();
+        Ok(crate::llm::engine::Scoring { scores, prompt_tokens: 100, reused_tokens: 90, run_tokens: 30, ms: 1.0 })
+    }
 }
 
 const WALK_APPLE: &str = "[WALK] <apple> (12)";
 const GRAB_APPLE: &str = "[GRAB] <apple> (12)";
 
+/// The paper's Algorithm 1 as written: the termination model judges every child, actions included
+/// (the default asks it about subgoals only; `the_world_is_the_verdict_on_runnable_actions` tests that).
 fn cfg() -> PlannerConfig {
-    PlannerConfig::default()
+    PlannerConfig { judge_actions: true, fresh_steps: false, ..PlannerConfig::default() }
 }
 
 fn run_with(model: &mut Scripted, env: &mut dyn Env, cfg: &PlannerConfig) -> PlanOutcome {
@@ -234,34 +257,47 @@ fn run_owned(answers: &[String], cfg: &PlannerConfig, env: &mut dyn Env) -> (Pla
 fn every_budget_ends_the_loop_and_is_named() {
     let sim = || SimEnv::new(World::demo(), vec![]);
     let b = Budgets::default();
-    // LLM calls: the model replans forever.
-    let c = PlannerConfig {
-        budgets: Budgets { max_llm_calls: 5, max_replans: 100, max_children: 100, ..b.clone() },
-        ..cfg()
-    };
-    let (out, _) = run_owned(&always(&["subgoal: x", "replan: congruence: no"], 100), &c, &mut sim());
-    assert_eq!(out.stop, StopCause::Budget("llm_calls"));
-    assert_eq!(out.stats.llm_calls, 5);
-
-    // Replans per node: at the root, the run ends.
-    let c = PlannerConfig { budgets: Budgets { max_replans: 2, ..b.clone() }, ..cfg() };
-    let (out, _) = run_owned(&always(&["subgoal: x", "replan: congruence: no"], 100), &c, &mut sim());
-    assert_eq!(out.stop, StopCause::Budget("replans"));
-    assert_eq!(out.stats.replans, 3);
-    assert_eq!(out.tree.node(0).status, Status::Abandoned);
-
-    // Children per node (a dry run: every action is ok, and the model never says done).
     let walk = format!("action: {WALK_APPLE}");
     let exec = format!("execute: {WALK_APPLE}");
+    // LLM calls: the model's every step is rejected, forever. The root has no replan or children
+    // budget of its own (abandoning it would end the run): the run's budgets end it.
+    let rejecting = PlannerConfig {
+        budgets: Budgets { max_llm_calls: 5, max_replans: 2, max_children: 2, ..b.clone() },
+        strength: Strength::Format,
+        symbolic_check: false,
+        ..cfg()
+    };
+    let (out, _) = run_owned(&always(&[&walk, "replan: congruence: no"], 100), &rejecting, &mut sim());
+    assert_eq!(out.stop, StopCause::Budget("llm_calls"));
+    assert_eq!(out.stats.llm_calls, 5);
+    assert_eq!(out.stats.replans, 2, "over the root's max_replans, and it goes on");
+    assert_eq!(out.tree.node(0).status, Status::Decomposing);
+
+    // Replans per node, below the root: the subgoal is abandoned and the root goes on.
+    let c = PlannerConfig { budgets: Budgets { max_replans: 1, max_llm_calls: 9, ..b.clone() }, ..rejecting.clone() };
+    let mut answers = vec!["subgoal: take the apple".to_string(), "decompose".into()];
+    answers.extend(always(&[&walk, "replan: congruence: no"], 4));
+    answers.extend([walk.clone(), exec.clone(), "done".into()]);
+    let (out, _) = run_owned(&answers, &c, &mut sim());
+    assert_eq!(out.tree.node(1).status, Status::Abandoned);
+    assert!(out.tree.node(1).history.last().unwrap().1.contains("replans"), "{:?}", out.tree.node(1).history);
+    assert_eq!(out.stop, StopCause::Done);
+
+    // Children per node, below the root (a dry run: every action is ok).
     let c = PlannerConfig {
         budgets: Budgets { max_children: 3, ..b.clone() },
         strength: Strength::Format,
         symbolic_check: false,
         ..cfg()
     };
-    let (out, _) = run_owned(&always(&[&walk, &exec], 100), &c, &mut DryRunEnv::new(World::demo(), vec![]));
-    assert_eq!(out.stop, StopCause::Budget("children"));
-    assert_eq!(out.executed.len(), 3);
+    let mut answers = vec!["subgoal: take the apple".to_string(), "decompose".into()];
+    answers.extend(always(&[&walk, &exec], 6));
+    answers.extend([walk.clone(), exec.clone(), "done".into()]);
+    let (out, _) = run_owned(&answers, &c, &mut DryRunEnv::new(World::demo(), vec![]));
+    assert_eq!(out.tree.node(1).status, Status::Abandoned);
+    assert!(out.tree.node(1).history.last().unwrap().1.contains("children"), "{:?}", out.tree.node(1).history);
+    assert_eq!(out.executed.len(), 4);
+    assert_eq!(out.stop, StopCause::Done);
 
     // Executed actions.
     let c = PlannerConfig {
@@ -290,8 +326,9 @@ fn a_child_over_its_replan_budget_is_abandoned_and_its_parent_goes_on() {
             "decompose",
             "subgoal: a",
             "replan: environment: no",
-            "subgoal: b",
-            "replan: environment: no",
+            // A rejected subgoal leaves the node to actions until one runs.
+            &format!("action: {WALK_APPLE}"),
+            "replan: congruence: no",
             // back at the root, told the step was given up
             &format!("action: {WALK_APPLE}"),
             &format!("execute: {WALK_APPLE}"),
@@ -436,4 +473,88 @@ fn config_round_trips_through_json() {
     };
     let back = PlannerConfig::from_json(&c.to_json()).unwrap();
     assert_eq!(back.to_json(), c.to_json());
+}
+
+#[test]
+fn the_world_is_the_verdict_on_runnable_actions() {
+    // Default settings: a proposed action the symbolic check finds runnable runs without a verdict.
+    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &PlannerConfig::default());
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+    assert_eq!(out.stats.llm_calls, 2, "no termination call for the action");
+    assert!(m.prompts.iter().all(|p| !p.contains("Judge the step.")));
+    assert!(out.tree.node(1).history.iter().any(|(_, why)| why.contains("the world checks it")));
+}
+
+#[test]
+fn a_subgoal_repeating_its_goal_is_rejected_unjudged_and_the_node_turns_to_actions() {
+    let (out, m) = run(
+        &[
+            "subgoal: put the apple in the fridge",
+            &format!("action: {WALK_APPLE}"),
+            "subgoal: open the fridge",
+            "replan: congruence: not yet",
+            "done",
+        ],
+        &PlannerConfig::default(),
+    );
+    assert_eq!(out.tree.node(1).status, Status::Replanned);
+    assert!(m.grammars[0].contains("subgoal: "), "{}", m.grammars[0]);
+    assert!(!m.grammars[1].contains("subgoal: "), "no subgoal right after an echo: {}", m.grammars[1]);
+    assert!(m.prompts[1].contains("it repeats the goal"), "{}", m.prompts[1]);
+    assert!(m.grammars[2].contains("subgoal: "), "subgoals again once an action ran: {}", m.grammars[2]);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+}
+
+#[test]
+fn no_walk_is_offered_right_after_a_walk_unless_nothing_else_is() {
+    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done"], &PlannerConfig::default());
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE]);
+    assert!(m.grammars[0].contains("\"[WALK] \""), "{}", m.grammars[0]);
+    assert!(!m.grammars[1].contains("\"[WALK] \"") && m.grammars[1].contains("\"[GRAB] \""), "{}", m.grammars[1]);
+    // Off: walks stay on offer.
+    let (_, m) = run(
+        &[&format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done"],
+        &PlannerConfig { fresh_steps: false, ..PlannerConfig::default() },
+    );
+    assert!(m.grammars[1].contains("\"[WALK] \""), "{}", m.grammars[1]);
+}
+
+#[test]
+fn choosing_by_score_runs_the_likeliest_admitted_action_not_the_written_one() {
+    let walk_fridge = "[WALK] <fridge> (10)";
+    let mut m = Scripted::new(&[&format!("action: {WALK_APPLE}"), "done"]);
+    m.prefer = Some(format!("action: {walk_fridge}"));
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let c = PlannerConfig { choose: ActionChoice::Score, ..PlannerConfig::default() };
+    let out = run_with(&mut m, &mut env, &c);
+    assert_eq!(plan_lines(&out), [walk_fridge]);
+    // Every candidate is an admitted action line, the written one among them.
+    let cands = &m.scored[0];
+    assert!(cands.len() > 2 && cands.iter().all(|l| l.starts_with("action: [")), "{cands:?}");
+    assert!(cands.contains(&format!("action: {WALK_APPLE}")));
+    assert_eq!(out.stats.llm_calls, 3, "decompose, score, decompose");
+    assert_eq!(out.stats.calls[1].role, "score");
+    assert_eq!(out.stats.calls[1].output, format!("action: {walk_fridge}"));
+}
+
+#[test]
+fn fresh_steps_drop_repeats_only_while_something_else_is_left() {
+    use crate::action::{ObjRef, Verb};
+    let act = |v: Verb, o: &str, id: u32| Action::new(v, vec![ObjRef::new(o, id)]).unwrap();
+    let (walk_a, walk_f, grab_a, open_f) = (
+        act(Verb::Walk, "apple", 12),
+        act(Verb::Walk, "fridge", 10),
+        act(Verb::Grab, "apple", 12),
+        act(Verb::Open, "fridge", 10),
+    );
+    let all = vec![walk_a.clone(), walk_f.clone(), grab_a.clone(), open_f.clone()];
+    // Right after a walk: no walk.
+    assert_eq!(planner::fresh_steps(all.clone(), &[walk_a.clone()], &[]), [grab_a.clone(), open_f.clone()]);
+    // The run's last three actions, and what this node has done, are not offered again.
+    let ran = [open_f.clone(), walk_f.clone(), grab_a.clone()];
+    assert_eq!(planner::fresh_steps(all.clone(), &ran, &[]), [walk_a.clone()]);
+    assert_eq!(planner::fresh_steps(all.clone(), &[], &[walk_a.clone(), open_f.clone()]), [walk_f.clone(), grab_a.clone()]);
+    // Nothing left: everything stays on offer (the rule never leaves a node without a step).
+    assert_eq!(planner::fresh_steps(vec![walk_f.clone()], &[walk_a.clone()], &[walk_f.clone()]), [walk_f]);
 }
