@@ -207,6 +207,8 @@ fn the_cli_runs_the_random_planner_on_the_demo_file_as_json() {
     assert_eq!(v["summary"]["tasks"], 3);
     assert_eq!(v["grammar_errors"], 0);
     assert!(v["protocol_text"].as_str().unwrap().contains("goals in words"));
+    // A task file of one's own gets the whole embodiment.
+    assert_eq!(v["excluded_verbs"], serde_json::json!([]));
     assert!(export.is_file());
     assert!(traces.join("apple_in_fridge.jsonl").is_file());
     let bad = Command::new(env!("CARGO_BIN_EXE_step"))
@@ -242,4 +244,40 @@ fn eai_rule_by_gold_run_matches_eai_stored_lists_on_eai_tasks() {
     eprintln!("{n} EAI tasks: stored lists {ms:.2} objects, gold-run rule {mo:.2}; identical for {same}");
     assert!((mo - ms).abs() / ms < 0.15, "stored {ms:.2} vs gold run {mo:.2}");
     assert!(same * 2 > n, "identical lists for only {same} of {n}");
+}
+
+#[test]
+fn on_eai_tasks_the_cli_leaves_out_the_actions_eai_cannot_score() {
+    if EaiData::open(None).is_err() {
+        eprintln!("note: skipping: no EAI data");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str]| {
+        let export = dir.path().join(format!("x{}.json", extra.len()));
+        let out = Command::new(env!("CARGO_BIN_EXE_step"))
+            .args(["eval", "plan", "--planner", "random", "--random-actions", "40", "--json", "--task", "3_1"])
+            .args(["--task", "628_1", "--task", "11_1", "--export-eai"])
+            .arg(&export)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        // The plans' own text (each entry's llm_output), not the escaped JSON around it.
+        let entries: Vec<serde_json::Value> = serde_json::from_str(&std::fs::read_to_string(&export).unwrap()).unwrap();
+        assert_eq!(entries.len(), 3);
+        let plans: String = entries.iter().map(|e| e["llm_output"].as_str().unwrap().to_string()).collect();
+        (v, plans)
+    };
+    let unscoreable = ["SLEEP", "WAKEUP", "LOOKAT_SHORT", "LOOKAT_LONG"];
+    let (v, exported) = run(&[]);
+    assert_eq!(v["excluded_verbs"], serde_json::json!(unscoreable));
+    for verb in unscoreable {
+        assert!(!exported.contains(&format!("\"{verb}\"")), "{verb} exported:\n{exported}");
+    }
+    // --all-verbs offers them: 120 uniform draws over these small scenes name at least one.
+    let (v, exported) = run(&["--all-verbs"]);
+    assert_eq!(v["excluded_verbs"], serde_json::json!([]));
+    assert!(unscoreable.iter().any(|verb| exported.contains(&format!("\"{verb}\""))), "{exported}");
 }

@@ -86,6 +86,10 @@ pub struct PlanArgs {
     /// are not offered again when anything else can be done; the random planner obeys the same rule).
     #[arg(long)]
     pub allow_repeats: bool,
+    /// On EAI's tasks, also offer the actions EAI's own scorer cannot score (SLEEP, WAKEUP,
+    /// LOOKAT_SHORT, LOOKAT_LONG); they are left out by default so `--export-eai` plans can be scored.
+    #[arg(long)]
+    pub all_verbs: bool,
     /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
     /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
     #[arg(long, default_value = "generate")]
@@ -172,6 +176,11 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             judge_actions: a.judge_actions,
             fresh_steps: !a.allow_repeats,
             choose: a.choose,
+            excluded_verbs: if source.tasks_file.is_none() && !a.all_verbs {
+                crate::eval::plans::EAI_UNSCOREABLE.to_vec()
+            } else {
+                Vec::new()
+            },
             ..defaults
         },
         seen: a.protocol,

@@ -221,6 +221,16 @@ fn per_task(reports: &[TaskPlanReport], f: impl Fn(&TaskPlanReport) -> usize) ->
     PerTask { total, mean: if reports.is_empty() { 0.0 } else { total as f64 / reports.len() as f64 } }
 }
 
+/// Verbs of our embodiment that EAI's own scorer cannot score, left out of the grammars on EAI's
+/// tasks so exported plans can be scored there: SLEEP and WAKEUP are not in its action space (a
+/// hallucination error), LOOKAT_SHORT and LOOKAT_LONG have no executor there (the scorer crashes).
+pub const EAI_UNSCOREABLE: [crate::action::Verb; 4] = [
+    crate::action::Verb::Sleep,
+    crate::action::Verb::WakeUp,
+    crate::action::Verb::LookAtShort,
+    crate::action::Verb::LookAtLong,
+];
+
 /// The batch report.
 #[derive(Clone, Debug, Serialize)]
 pub struct PlanEvalReport {
@@ -229,6 +239,8 @@ pub struct PlanEvalReport {
     pub protocol: Protocol,
     pub protocol_text: String,
     pub comparable_with_eai_table: bool,
+    /// Verbs no grammar offered (see [`EAI_UNSCOREABLE`]).
+    pub excluded_verbs: Vec<String>,
     pub source: String,
     pub summary: Summary,
     pub rates: super::run::Rates,
@@ -279,6 +291,7 @@ impl PlanEvalReport {
             protocol: proto,
             protocol_text: proto.to_string(),
             comparable_with_eai_table: proto.comparable_with_eai(),
+            excluded_verbs: cfg.planner.excluded_verbs.iter().map(|v| v.name().to_string()).collect(),
             source,
             rates: summary.rates(),
             summary,
@@ -316,6 +329,12 @@ impl PlanEvalReport {
                 " (not EAI's protocol: do not compare with EAI's table)"
             }
         );
+        if !self.excluded_verbs.is_empty() {
+            out.push_str(&format!(
+                "actions not offered: {} (EAI's scorer cannot score them; --all-verbs offers them)\n",
+                self.excluded_verbs.join(", ")
+            ));
+        }
         out.push_str(&self.summary.table());
         out.push_str(&format!("grammar errors: {}\n", self.grammar_errors));
         let row = |name: &str, p: &PerTask| format!("  {name:<22} {:>9.2} per task ({} in all)\n", p.mean, p.total);

@@ -89,6 +89,20 @@ pub enum ActionSet {
 }
 
 impl ActionSet {
+    /// The same set without any action of `verbs` (an embodiment narrower than [`Verb::ALL`]).
+    pub fn without(self, verbs: &[Verb]) -> ActionSet {
+        if verbs.is_empty() {
+            return self;
+        }
+        match self {
+            ActionSet::Slots(specs, objects) => ActionSet::Slots(
+                specs.into_iter().filter(|s| !verbs.iter().any(|v| v.name() == s.name)).collect(),
+                objects,
+            ),
+            ActionSet::Exact(list) => ActionSet::Exact(list.into_iter().filter(|a| !verbs.contains(&a.verb)).collect()),
+        }
+    }
+
     /// Every verb of [`Verb::ALL`] over these objects in every slot.
     pub fn format(objects: &[ObjRef]) -> ActionSet {
         ActionSet::Slots(Verb::ALL.iter().map(|&v| VerbSpec::from(v)).collect(), objects.to_vec())
@@ -855,4 +869,20 @@ mod tests {
         assert!(VerdictGrammar::new(set, MAX_TEXT_CHARS + 1).to_lark().is_err());
     }
 
+
+    #[test]
+    fn without_drops_the_verbs_from_both_kinds_of_set() {
+        let objs = [ObjRef::new("apple", 12), ObjRef::new("fridge", 10)];
+        let ActionSet::Slots(specs, _) = ActionSet::format(&objs).without(&[Verb::Grab, Verb::Sleep]) else {
+            panic!("slots expected")
+        };
+        assert_eq!(specs.len(), Verb::ALL.len() - 2);
+        assert!(specs.iter().all(|s| s.name != "GRAB" && s.name != "SLEEP"));
+        let grab = Action::new(Verb::Grab, vec![objs[0].clone()]).unwrap();
+        let walk = Action::new(Verb::Walk, vec![objs[1].clone()]).unwrap();
+        let ActionSet::Exact(list) = ActionSet::Exact(vec![grab, walk.clone()]).without(&[Verb::Grab]) else {
+            panic!("exact expected")
+        };
+        assert_eq!(list, [walk]);
+    }
 }

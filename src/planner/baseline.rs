@@ -151,7 +151,7 @@ pub fn random(env: &mut dyn Env, req: &PlanRequest, cfg: &PlannerConfig, trace: 
             Ok(w) => w,
             Err(e) => break e,
         };
-        let set = match crate::scene_grammar::action_set(cfg.strength, world, &req.focus) {
+        let set = match cfg.action_set(cfg.strength, world, &req.focus) {
             ActionSet::Exact(list) if cfg.fresh_steps => {
                 ActionSet::Exact(crate::planner::planner::fresh_steps(list, &executed, &executed))
             }
@@ -274,7 +274,7 @@ pub fn flat(
                "instruction": req.instruction, "env": env.name()}),
     );
     let max_lines = cfg.budgets.max_actions.clamp(1, 256);
-    let grammar = PlanGrammar { actions: crate::scene_grammar::action_set(strength, world, &req.focus), max_lines };
+    let grammar = PlanGrammar { actions: cfg.action_set(strength, world, &req.focus), max_lines };
     let lark = match grammar.to_lark() {
         Ok(l) => l,
         Err(e) => return finish(tree, vec![], StopCause::Error(format!("plan grammar: {e}")), stats, t0, trace),

@@ -23,7 +23,7 @@ use std::time::Duration;
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use crate::action::Action;
+use crate::action::{Action, Verb};
 use crate::llm::engine::{GenOptions, Generate};
 use crate::llm::sample::Sampling;
 use crate::world::World;
@@ -167,6 +167,8 @@ pub struct PlannerConfig {
     pub fresh_steps: bool,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
+    /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
+    pub excluded_verbs: Vec<Verb>,
     /// Bytes of the observation shown in each prompt.
     pub observe_budget: usize,
     /// Longest subgoal text a decomposition may write.
@@ -189,10 +191,19 @@ impl Default for PlannerConfig {
             judge_actions: false,
             fresh_steps: true,
             choose: ActionChoice::Generate,
+            excluded_verbs: Vec::new(),
             observe_budget: 600,
             subgoal_chars: 40,
             reason_chars: 48,
         }
+    }
+}
+
+impl PlannerConfig {
+    /// The actions the grammar of a decision admits: the strength's set over `focus` in `world`,
+    /// without the excluded verbs. Every planner builds its grammars through this.
+    pub fn action_set(&self, strength: Strength, world: &World, focus: &[u32]) -> crate::grammar::ActionSet {
+        crate::scene_grammar::action_set(strength, world, focus).without(&self.excluded_verbs)
     }
 }
 
@@ -384,6 +395,7 @@ impl PlannerConfig {
             "judge_actions": self.judge_actions,
             "fresh_steps": self.fresh_steps,
             "choose": self.choose.name(),
+            "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
             "subgoal_chars": self.subgoal_chars,
             "reason_chars": self.reason_chars,
@@ -447,6 +459,15 @@ impl PlannerConfig {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,
         };
+        if let Some(list) = v.get("excluded_verbs").and_then(Value::as_array) {
+            c.excluded_verbs = list
+                .iter()
+                .map(|x| {
+                    let name = x.as_str().unwrap_or_default();
+                    name.parse::<Verb>().map_err(|_| format!("settings.excluded_verbs: unknown action {x}"))
+                })
+                .collect::<Result<_, _>>()?;
+        }
         if let Some(n) = usize_of(v, "observe_budget")? {
             c.observe_budget = n;
         }

@@ -159,7 +159,7 @@ impl Run<'_> {
     }
 
     fn action_set(&self) -> Result<ActionSet, StopCause> {
-        Ok(crate::scene_grammar::action_set(self.cfg.strength, self.world()?, &self.focus))
+        Ok(self.cfg.action_set(self.cfg.strength, self.world()?, &self.focus))
     }
 
     /// The context of a decision at `node`.
