@@ -169,9 +169,14 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         }
         _ => true,
     };
-    let mut by_node: BTreeMap<usize, f64> = BTreeMap::new();
+    // A tree node's latency: the decomposition call that proposed it plus the calls that judged or
+    // scored it (grouping by the calls' node would charge a parent with all its children's calls).
+    let mut node_ms: Vec<f64> = Vec::new();
     for c in &out.stats.calls {
-        *by_node.entry(c.node).or_default() += c.total_ms;
+        match node_ms.last_mut() {
+            Some(t) if c.role != "decompose" && c.role != "flat" => *t += c.total_ms,
+            _ => node_ms.push(c.total_ms),
+        }
     }
     trace.event("score", serde_json::to_value(&report).unwrap_or_default());
     let r = TaskPlanReport {
@@ -188,7 +193,7 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         replans: out.stats.replans,
         symbolic_rejections: out.stats.symbolic_rejections,
         grammar_errors: is_grammar_error(&out.stop) as usize,
-        node_ms: by_node.into_values().collect(),
+        node_ms,
         wall_ms: out.stats.wall_ms,
         replay_agrees,
         score: report,

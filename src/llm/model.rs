@@ -413,9 +413,10 @@ impl HeadBlock<'_> {
             }
             // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
             let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * self.nh + self.head) * hd), hd) };
-            let inv = 1.0 / sum;
             for (j, &p) in sc[..seen].iter().enumerate() {
-                let p = p * inv;
+                // A division, as the reference does: multiplying by 1/sum measurably moves the
+                // logits away from it over 30 layers (normalised error 1.8e-4 -> 8.1e-4 on SmolLM2).
+                let p = p / sum;
                 for (yo, &vv) in y.iter_mut().zip(&self.values[j * kvw + kvh * hd..][..hd]) {
                     *yo += p * vv;
                 }
