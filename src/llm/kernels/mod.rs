@@ -189,20 +189,36 @@ impl QMatrix {
         match &self.storage {
             Storage::Quant { fmt, data, row_bytes } => {
                 let t = q.t;
-                for r in rows {
-                    let w = &data[r * row_bytes..(r + 1) * row_bytes];
+                let row = |r: usize| &data[r * row_bytes..(r + 1) * row_bytes];
+                let mut r = rows.start;
+                // Few tokens (decoding): four rows at a time, so four independent sums overlap and
+                // share each activation block. Results are the same as one row at a time.
+                if t < 4 {
+                    while r + 4 <= rows.end {
+                        let w = [row(r), row(r + 1), row(r + 2), row(r + 3)];
+                        for i in 0..t {
+                            let out = dot::<4, 1>(kernel, *fmt, &w, &[q.row(i)]);
+                            for (k, [v]) in out.into_iter().enumerate() {
+                                *y.add(i * ld + r + k) = v;
+                            }
+                        }
+                        r += 4;
+                    }
+                }
+                for r in r..rows.end {
+                    let w = [row(r)];
                     let mut i = 0;
                     // Four tokens at a time share each decoded weight block.
                     while i + 4 <= t {
                         let a = [q.row(i), q.row(i + 1), q.row(i + 2), q.row(i + 3)];
-                        let out = dot::<4>(kernel, *fmt, w, &a);
+                        let [out] = dot::<1, 4>(kernel, *fmt, &w, &a);
                         for (k, v) in out.into_iter().enumerate() {
                             *y.add((i + k) * ld + r) = v;
                         }
                         i += 4;
                     }
                     while i < t {
-                        let [v] = dot::<1>(kernel, *fmt, w, &[q.row(i)]);
+                        let [[v]] = dot::<1, 1>(kernel, *fmt, &w, &[q.row(i)]);
                         *y.add(i * ld + r) = v;
                         i += 1;
                     }
@@ -242,13 +258,18 @@ impl Kernel {
     }
 }
 
-/// `NT` dot products of one weight row with `NT` activation rows.
+/// `NR × NT` dot products: each of `NR` weight rows with each of `NT` activation rows.
 #[inline]
-fn dot<const NT: usize>(kernel: Kernel, fmt: Format, w: &[u8], a: &[&[Q8Block]; NT]) -> [f32; NT] {
+fn dot<const NR: usize, const NT: usize>(
+    kernel: Kernel,
+    fmt: Format,
+    w: &[&[u8]; NR],
+    a: &[&[Q8Block]; NT],
+) -> [[f32; NT]; NR] {
     match kernel {
-        // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
-        Kernel::Avx2 => unsafe { avx2::dot::<NT>(fmt, w, a) },
-        Kernel::Scalar => scalar::dot::<NT>(fmt, w, a),
+        // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2, FMA and F16C.
+        Kernel::Avx2 => unsafe { avx2::dot::<NR, NT>(fmt, w, a) },
+        Kernel::Scalar => w.map(|w| scalar::dot::<NT>(fmt, w, a)),
     }
 }
 
@@ -277,15 +298,23 @@ pub(crate) fn reduce_lanes(l: &[f32; 8]) -> f32 {
     (s[0] + s[2]) + (s[1] + s[3])
 }
 
-/// f16 bits → f32 (exact): normal numbers by bit arithmetic, the rest through `half`.
+/// f16 bits → f32 (exact), by arithmetic alone: a library call here, even on the rare path, would
+/// make the compiler keep the kernels' float accumulators on the stack around it.
 #[inline(always)]
 pub(crate) fn f16(lo: u8, hi: u8) -> f32 {
     let h = u16::from_le_bytes([lo, hi]) as u32;
-    let exp = (h >> 10) & 0x1f;
-    if exp == 0 || exp == 31 {
-        return half::f16::from_bits(h as u16).to_f32();
+    let (sign, exp, man) = ((h & 0x8000) << 16, (h >> 10) & 0x1f, h & 0x3ff);
+    if exp == 0 {
+        // Zero and subnormals: man · 2⁻²⁴, exact in f32.
+        let v = man as f32 * (1.0 / 16_777_216.0);
+        return f32::from_bits(v.to_bits() | sign);
     }
-    f32::from_bits(((h & 0x8000) << 16) | ((exp + 112) << 23) | ((h & 0x3ff) << 13))
+    if exp == 31 {
+        // Infinities, and NaNs made quiet (as `half` does).
+        let quiet = if man != 0 { 0x0040_0000 } else { 0 };
+        return f32::from_bits(sign | 0x7f80_0000 | quiet | (man << 13));
+    }
+    f32::from_bits(sign | ((exp + 112) << 23) | (man << 13))
 }
 
 /// Scale and minimum of sub-block `j` (0..8) of a Q4_K block from its 12 packed 6-bit bytes.

@@ -76,7 +76,7 @@ fn simd_kernels_equal_the_scalar_ones_bit_for_bit() {
     }
     let mut rng = StdRng::seed_from_u64(11);
     for (dtype, fmt) in FORMATS {
-        for (cols, t) in [(256, 1), (768, 5), (1024, 9)] {
+        for (cols, t) in [(256, 1), (768, 3), (768, 5), (1024, 9)] {
             let (m, _) = quantised(&mut rng, dtype, 13, cols);
             let x = randn(&mut rng, t * cols);
             let mut q = Q8Acts::default();
@@ -136,5 +136,14 @@ fn activation_blocks_round_trip_within_half_a_step() {
         let isum: i32 = b.qs.iter().map(|&v| v as i32).sum();
         assert_eq!(b.s, b.d * isum as f32);
         assert!(a.iter().zip(r).all(|(a, r)| (a - r).abs() <= b.d * 0.5 + 1e-6));
+    }
+}
+
+#[test]
+fn f16_conversion_is_exact_for_every_bit_pattern() {
+    for h in 0..=u16::MAX {
+        let want = half::f16::from_bits(h).to_f32();
+        let got = f16(h as u8, (h >> 8) as u8);
+        assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{h:#06x}: {got} vs {want}");
     }
 }
