@@ -78,7 +78,7 @@ mod x86 {
 
         /// Adds weight block `wq` (32 bytes in element order; signed i8, or unsigned with `signed`
         /// false) times activation block `c` of each token, lanes scaled by the i16s in `scale`, times
-        /// `f * d_activation`; and `min * s_activation` to the min sums.
+        /// `f`, times `d_activation`; and `min * s_activation` to the min sums.
         #[inline(always)]
         unsafe fn add(
             &mut self,
@@ -91,12 +91,16 @@ mod x86 {
             min: Option<f32>,
         ) {
             let wabs = if signed { _mm256_sign_epi8(wq, wq) } else { wq };
+            let fv = _mm256_set1_ps(f);
             for k in 0..NT {
                 let b = a[k].get_unchecked(c);
                 let av = _mm256_loadu_si256(b.qs.as_ptr() as *const __m256i);
                 let av = if signed { _mm256_sign_epi8(av, wq) } else { av };
                 let lanes = _mm256_madd_epi16(_mm256_maddubs_epi16(wabs, av), scale);
-                self.acc[k] = _mm256_fmadd_ps(_mm256_cvtepi32_ps(lanes), _mm256_set1_ps(f * b.d), self.acc[k]);
+                // (lanes · f) · d: the weight scale is broadcast once per block for all tokens and
+                // the activation scale is broadcast straight from memory.
+                let x = _mm256_mul_ps(_mm256_cvtepi32_ps(lanes), fv);
+                self.acc[k] = _mm256_fmadd_ps(x, _mm256_set1_ps(b.d), self.acc[k]);
                 if let Some(m) = min {
                     self.mins[k] += m * b.s;
                 }
