@@ -19,7 +19,8 @@ use std::sync::Arc;
 use candle_core::Device;
 
 use super::gguf::{Arch, GgufFile};
-use super::kernels::{dot_f32, matmul, matmul_many, pool, Kernel, Q8Acts, QMatrix, SendPtr};
+use super::kernels::attn::{AttnOps, Portable};
+use super::kernels::{dot_f32, kernel, matmul, matmul_many, pool, Kernel, Q8Acts, QMatrix, SendPtr};
 use super::{LlmError, Result};
 
 /// Hyper-parameters read from the GGUF metadata (`<arch>.*` keys).
@@ -335,7 +336,7 @@ impl Layer {
         let out = SendPtr(att.as_mut_ptr());
         let (keys, values, q) = (&self.cache.k[..kv_len * kvw], &self.cache.v[..kv_len * kvw], &*q);
         let scale = 1.0 / (hd as f32).sqrt();
-        let kernel = Kernel::detect();
+        let kernel = kernel();
         let task = |task: usize| {
             let (head, qb) = (task % nh, task / nh);
             // SAFETY: each task owns its row of `scores` and the (query, head) slices of `att` it
@@ -346,7 +347,8 @@ impl Layer {
             match kernel {
                 // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
                 Kernel::Avx2 => unsafe { job.run_avx2(rows, sc) },
-                Kernel::Scalar => job.run(rows, sc),
+                // SAFETY: the portable loops need no CPU feature.
+                Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
             }
         };
         pool::global().run(n_tasks, &task);
@@ -372,28 +374,30 @@ struct HeadBlock<'a> {
 }
 
 impl HeadBlock<'_> {
-    /// The same code compiled for AVX2/FMA, so the float loops use 256-bit vectors; the sums keep
-    /// their fixed order (`dot_f32` has eight lanes either way), so both paths give the same bits.
+    /// The same code over the AVX2 loops, compiled with those features; both loop sets compute the
+    /// same bits (see [`super::kernels::attn`]), so both paths give the same results.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn run_avx2(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
-        self.run(rows, sc)
+        self.run::<super::kernels::attn::Avx2>(rows, sc)
     }
 
     #[cfg(not(target_arch = "x86_64"))]
     unsafe fn run_avx2(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
-        self.run(rows, sc)
+        self.run::<Portable>(rows, sc)
     }
 
+    /// # Safety
+    /// `O`'s CPU features must be present.
     #[inline(always)]
-    fn run(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+    unsafe fn run<O: AttnOps>(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
         let (hd, kvw, kvh) = (self.hd, self.kvw, self.kvh);
         for i in rows {
             let qi = &self.q[(i * self.nh + self.head) * hd..][..hd];
             let seen = self.pos + i + 1; // causal: keys 0..=pos+i
             let mut max = f32::NEG_INFINITY;
             for (j, sj) in sc[..seen].iter_mut().enumerate() {
-                *sj = dot_f32(qi, &self.keys[j * kvw + kvh * hd..][..hd]) * self.scale;
+                *sj = O::dot(qi, &self.keys[j * kvw + kvh * hd..][..hd]) * self.scale;
                 max = max.max(*sj);
             }
             let mut sum = 0f32;
@@ -404,12 +408,8 @@ impl HeadBlock<'_> {
             // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
             let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * self.nh + self.head) * hd), hd) };
             let inv = 1.0 / sum;
-            for (j, &p) in sc[..seen].iter().enumerate() {
-                let p = p * inv;
-                for (yo, &vv) in y.iter_mut().zip(&self.values[j * kvw + kvh * hd..][..hd]) {
-                    *yo += p * vv;
-                }
-            }
+            sc[..seen].iter_mut().for_each(|p| *p *= inv);
+            O::weighted_sum(y, &sc[..seen], &self.values[kvh * hd..], kvw);
         }
     }
 }
