@@ -279,9 +279,7 @@ impl Transformer {
             let (g, u) = (fit(&mut s.g, t * cfg.n_ff), fit(&mut s.u, t * cfg.n_ff));
             s.q8.quantize(h, t, d);
             matmul_many(&[(&layer.gate, &mut *g), (&layer.up, &mut *u)], &s.q8, h, t);
-            for (g, u) in g.iter_mut().zip(u.iter()) {
-                *g = *g / (1.0 + (-*g).exp()) * u;
-            }
+            swiglu(g, u);
             let o = fit(&mut s.o, t * d);
             matmul(&layer.down, g, t, &mut s.q8, o);
             add(x, o);
@@ -449,6 +447,27 @@ fn rms_norm(x: &[f32], w: &[f32], eps: f32, y: &mut [f32]) {
             *yo = xi * r * wi;
         }
     }
+}
+
+/// `g = silu(g) · u`, element by element; on the pool for prompts (an exp per element is a
+/// serial stretch the other threads would wait through).
+fn swiglu(g: &mut [f32], u: &[f32]) {
+    const CHUNK: usize = 8192;
+    let f = |g: &mut [f32], u: &[f32]| {
+        for (g, u) in g.iter_mut().zip(u) {
+            *g = *g / (1.0 + (-*g).exp()) * u;
+        }
+    };
+    let n = g.len();
+    if n < 2 * CHUNK {
+        return f(g, u);
+    }
+    let out = SendPtr(g.as_mut_ptr());
+    pool::global().run(n.div_ceil(CHUNK), &|k| {
+        let (s, e) = (k * CHUNK, ((k + 1) * CHUNK).min(n));
+        // SAFETY: each task owns elements s..e of g (length n), which outlives the pool job.
+        f(unsafe { std::slice::from_raw_parts_mut(out.get().add(s), e - s) }, &u[s..e]);
+    });
 }
 
 fn add(x: &mut [f32], y: &[f32]) {

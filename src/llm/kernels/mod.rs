@@ -49,13 +49,54 @@ impl Q8Acts {
         // No quantised kernel takes a width that is not whole blocks (those matrices are kept as f32).
         self.nb = if cols % QK == 0 { cols / QK } else { 0 };
         self.blocks.resize(t * self.nb, Q8Block::default());
-        for (b, xs) in self.blocks.iter_mut().zip(x.chunks_exact(QK)) {
-            *b = quantize_block(xs);
+        let n = self.blocks.len();
+        // A prompt's activations are quantised on the pool: done by the caller alone, this was a
+        // serial stretch of every layer while the other threads waited.
+        const CHUNK: usize = 256;
+        if n >= 2 * CHUNK {
+            let out = BlockPtr(self.blocks.as_mut_ptr());
+            pool::global().run(n.div_ceil(CHUNK), &|k| {
+                for b in k * CHUNK..((k + 1) * CHUNK).min(n) {
+                    // SAFETY: b < n = blocks.len(), and each task writes its own range of blocks.
+                    unsafe { *out.get().add(b) = quantize_block(&x[b * QK..(b + 1) * QK]) };
+                }
+            });
+        } else {
+            for (b, xs) in self.blocks.iter_mut().zip(x.chunks_exact(QK)) {
+                *b = quantize_block(xs);
+            }
         }
     }
 
     pub fn row(&self, i: usize) -> &[Q8Block] {
         &self.blocks[i * self.nb..(i + 1) * self.nb]
+    }
+}
+
+#[derive(Clone, Copy)]
+struct BlockPtr(*mut Q8Block);
+// SAFETY: used only to write disjoint blocks from pool tasks (see `Q8Acts::quantize`).
+unsafe impl Send for BlockPtr {}
+unsafe impl Sync for BlockPtr {}
+
+impl BlockPtr {
+    fn get(&self) -> *mut Q8Block {
+        self.0
+    }
+}
+
+/// `v.round()` (halves away from zero) for |v| < 2³¹, in plain arithmetic that vectorises: without
+/// SSE4.1 in the baseline, `round()` is a library call per value.
+#[inline(always)]
+fn round_away(v: f32) -> i32 {
+    let a = v.abs();
+    let t = (a + 0.5) as i32;
+    // a + 0.5 can round up to the next integer (a = 0.49999997): take it back.
+    let t = t - ((t as f32 - 0.5) > a) as i32;
+    if v < 0.0 {
+        -t
+    } else {
+        t
     }
 }
 
@@ -66,7 +107,7 @@ fn quantize_block(xs: &[f32]) -> Q8Block {
     let mut qs = [0i8; QK];
     let mut sum = 0i32;
     for (q, &x) in qs.iter_mut().zip(xs) {
-        *q = (x * id).round().clamp(-127.0, 127.0) as i8;
+        *q = round_away(x * id).clamp(-127, 127) as i8;
         sum += *q as i32;
     }
     Q8Block { d, s: d * sum as f32, qs }

@@ -175,3 +175,20 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn rounding_matches_round_half_away_from_zero() {
+    let mut rng = StdRng::seed_from_u64(17);
+    let special = [0.0f32, -0.0, 0.5, -0.5, 1.5, 2.5, -2.5, 126.5, -126.5, 127.0, 0.49999997, -0.49999997, 2.4999998];
+    let random = (0..100_000).map(|_| rng.random_range(-130.0f32..130.0));
+    for v in special.into_iter().chain(random) {
+        assert_eq!(round_away(v), v.round() as i32, "{v}");
+    }
+    // Every half step in range, and its neighbours.
+    for i in -300..=300 {
+        let h = i as f32 * 0.5;
+        for v in [h, f32::from_bits(h.to_bits() + 1), f32::from_bits(h.to_bits().saturating_sub(1))] {
+            assert_eq!(round_away(v), v.round() as i32, "{v}");
+        }
+    }
+}
