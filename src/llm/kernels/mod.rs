@@ -234,8 +234,9 @@ impl QMatrix {
                 let row = |r: usize| &data[r * row_bytes..(r + 1) * row_bytes];
                 let mut r = rows.start;
                 // Few tokens (decoding): four rows at a time, so four independent sums overlap and
-                // share each activation block. Results are the same as one row at a time.
-                if t < 4 {
+                // share each activation block. Results are the same as one row at a time. Not for
+                // the 256-blocks: four rows of their unpacking spill registers and ran 3x slower.
+                if t < 4 && !matches!(fmt, Format::Q4K | Format::Q6K) {
                     while r + 4 <= rows.end {
                         let w = [row(r), row(r + 1), row(r + 2), row(r + 3)];
                         for i in 0..t {
