@@ -9,6 +9,7 @@
 //! min terms summed in order. Rows are split across the [`pool`]'s threads; each output element is
 //! computed by one thread, so results do not depend on the thread count.
 
+pub mod attn;
 pub mod avx2;
 pub mod pool;
 pub mod scalar;
@@ -48,13 +49,54 @@ impl Q8Acts {
         // No quantised kernel takes a width that is not whole blocks (those matrices are kept as f32).
         self.nb = if cols % QK == 0 { cols / QK } else { 0 };
         self.blocks.resize(t * self.nb, Q8Block::default());
-        for (b, xs) in self.blocks.iter_mut().zip(x.chunks_exact(QK)) {
-            *b = quantize_block(xs);
+        let n = self.blocks.len();
+        // A prompt's activations are quantised on the pool: done by the caller alone, this was a
+        // serial stretch of every layer while the other threads waited.
+        const CHUNK: usize = 256;
+        if n >= 2 * CHUNK {
+            let out = BlockPtr(self.blocks.as_mut_ptr());
+            pool::global().run(n.div_ceil(CHUNK), &|k| {
+                for b in k * CHUNK..((k + 1) * CHUNK).min(n) {
+                    // SAFETY: b < n = blocks.len(), and each task writes its own range of blocks.
+                    unsafe { *out.get().add(b) = quantize_block(&x[b * QK..(b + 1) * QK]) };
+                }
+            });
+        } else {
+            for (b, xs) in self.blocks.iter_mut().zip(x.chunks_exact(QK)) {
+                *b = quantize_block(xs);
+            }
         }
     }
 
     pub fn row(&self, i: usize) -> &[Q8Block] {
         &self.blocks[i * self.nb..(i + 1) * self.nb]
+    }
+}
+
+#[derive(Clone, Copy)]
+struct BlockPtr(*mut Q8Block);
+// SAFETY: used only to write disjoint blocks from pool tasks (see `Q8Acts::quantize`).
+unsafe impl Send for BlockPtr {}
+unsafe impl Sync for BlockPtr {}
+
+impl BlockPtr {
+    fn get(&self) -> *mut Q8Block {
+        self.0
+    }
+}
+
+/// `v.round()` (halves away from zero) for |v| < 2³¹, in plain arithmetic that vectorises: without
+/// SSE4.1 in the baseline, `round()` is a library call per value.
+#[inline(always)]
+fn round_away(v: f32) -> i32 {
+    let a = v.abs();
+    let t = (a + 0.5) as i32;
+    // a + 0.5 can round up to the next integer (a = 0.49999997): take it back.
+    let t = t - ((t as f32 - 0.5) > a) as i32;
+    if v < 0.0 {
+        -t
+    } else {
+        t
     }
 }
 
@@ -65,7 +107,7 @@ fn quantize_block(xs: &[f32]) -> Q8Block {
     let mut qs = [0i8; QK];
     let mut sum = 0i32;
     for (q, &x) in qs.iter_mut().zip(xs) {
-        *q = (x * id).round().clamp(-127.0, 127.0) as i8;
+        *q = round_away(x * id).clamp(-127, 127) as i8;
         sum += *q as i32;
     }
     Q8Block { d, s: d * sum as f32, qs }
@@ -189,22 +231,53 @@ impl QMatrix {
         match &self.storage {
             Storage::Quant { fmt, data, row_bytes } => {
                 let t = q.t;
-                for r in rows {
-                    let w = &data[r * row_bytes..(r + 1) * row_bytes];
-                    let mut i = 0;
-                    // Four tokens at a time share each decoded weight block.
-                    while i + 4 <= t {
-                        let a = [q.row(i), q.row(i + 1), q.row(i + 2), q.row(i + 3)];
-                        let out = dot::<4>(kernel, *fmt, w, &a);
-                        for (k, v) in out.into_iter().enumerate() {
-                            *y.add((i + k) * ld + r) = v;
+                let row = |r: usize| &data[r * row_bytes..(r + 1) * row_bytes];
+                let mut r = rows.start;
+                // Few tokens (decoding): four rows at a time, so four independent sums overlap and
+                // share each activation block. Results are the same as one row at a time. Not for
+                // the 256-blocks: four rows of their unpacking spill registers and ran 3x slower.
+                if t < 4 && !matches!(fmt, Format::Q4K | Format::Q6K) {
+                    while r + 4 <= rows.end {
+                        let w = [row(r), row(r + 1), row(r + 2), row(r + 3)];
+                        for i in 0..t {
+                            let out = dot::<4, 1>(kernel, *fmt, &w, &[q.row(i)]);
+                            for (k, [v]) in out.into_iter().enumerate() {
+                                *y.add(i * ld + r + k) = v;
+                            }
                         }
-                        i += 4;
+                        r += 4;
                     }
-                    while i < t {
-                        let [v] = dot::<1>(kernel, *fmt, w, &[q.row(i)]);
-                        *y.add(i * ld + r) = v;
-                        i += 1;
+                }
+                let first = r;
+                // Prompts: tokens in groups of TOKEN_GROUP, so that a group's activations stay in
+                // cache while every row of the range passes over them.
+                for i0 in (0..t).step_by(TOKEN_GROUP) {
+                    let end = (i0 + TOKEN_GROUP).min(t);
+                    for r in first..rows.end {
+                        let w = [row(r)];
+                        let mut i = i0;
+                        // Eight (then four) tokens at a time share each decoded weight block.
+                        while i + 8 <= end {
+                            let a = std::array::from_fn::<_, 8, _>(|k| q.row(i + k));
+                            let [out] = dot::<1, 8>(kernel, *fmt, &w, &a);
+                            for (k, v) in out.into_iter().enumerate() {
+                                *y.add((i + k) * ld + r) = v;
+                            }
+                            i += 8;
+                        }
+                        while i + 4 <= end {
+                            let a = [q.row(i), q.row(i + 1), q.row(i + 2), q.row(i + 3)];
+                            let [out] = dot::<1, 4>(kernel, *fmt, &w, &a);
+                            for (k, v) in out.into_iter().enumerate() {
+                                *y.add((i + k) * ld + r) = v;
+                            }
+                            i += 4;
+                        }
+                        while i < end {
+                            let [[v]] = dot::<1, 1>(kernel, *fmt, &w, &[q.row(i)]);
+                            *y.add(i * ld + r) = v;
+                            i += 1;
+                        }
                     }
                 }
             }
@@ -220,6 +293,10 @@ impl QMatrix {
         }
     }
 }
+
+/// Tokens whose activations one pass over a task's rows reuses (a multiple of 8): 32 rows of 4864
+/// columns of activation blocks are ~190 KB, well inside L2 beside the rows' weights.
+const TOKEN_GROUP: usize = 32;
 
 /// Which implementation runs the dot products.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -242,13 +319,18 @@ impl Kernel {
     }
 }
 
-/// `NT` dot products of one weight row with `NT` activation rows.
+/// `NR × NT` dot products: each of `NR` weight rows with each of `NT` activation rows.
 #[inline]
-fn dot<const NT: usize>(kernel: Kernel, fmt: Format, w: &[u8], a: &[&[Q8Block]; NT]) -> [f32; NT] {
+fn dot<const NR: usize, const NT: usize>(
+    kernel: Kernel,
+    fmt: Format,
+    w: &[&[u8]; NR],
+    a: &[&[Q8Block]; NT],
+) -> [[f32; NT]; NR] {
     match kernel {
-        // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
-        Kernel::Avx2 => unsafe { avx2::dot::<NT>(fmt, w, a) },
-        Kernel::Scalar => scalar::dot::<NT>(fmt, w, a),
+        // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2, FMA and F16C.
+        Kernel::Avx2 => unsafe { avx2::dot::<NR, NT>(fmt, w, a) },
+        Kernel::Scalar => w.map(|w| scalar::dot::<NT>(fmt, w, a)),
     }
 }
 
@@ -277,15 +359,23 @@ pub(crate) fn reduce_lanes(l: &[f32; 8]) -> f32 {
     (s[0] + s[2]) + (s[1] + s[3])
 }
 
-/// f16 bits → f32 (exact): normal numbers by bit arithmetic, the rest through `half`.
+/// f16 bits → f32 (exact), by arithmetic alone: a library call here, even on the rare path, would
+/// make the compiler keep the kernels' float accumulators on the stack around it.
 #[inline(always)]
 pub(crate) fn f16(lo: u8, hi: u8) -> f32 {
     let h = u16::from_le_bytes([lo, hi]) as u32;
-    let exp = (h >> 10) & 0x1f;
-    if exp == 0 || exp == 31 {
-        return half::f16::from_bits(h as u16).to_f32();
+    let (sign, exp, man) = ((h & 0x8000) << 16, (h >> 10) & 0x1f, h & 0x3ff);
+    if exp == 0 {
+        // Zero and subnormals: man · 2⁻²⁴, exact in f32.
+        let v = man as f32 * (1.0 / 16_777_216.0);
+        return f32::from_bits(v.to_bits() | sign);
     }
-    f32::from_bits(((h & 0x8000) << 16) | ((exp + 112) << 23) | ((h & 0x3ff) << 13))
+    if exp == 31 {
+        // Infinities, and NaNs made quiet (as `half` does).
+        let quiet = if man != 0 { 0x0040_0000 } else { 0 };
+        return f32::from_bits(sign | 0x7f80_0000 | quiet | (man << 13));
+    }
+    f32::from_bits(sign | ((exp + 112) << 23) | (man << 13))
 }
 
 /// Scale and minimum of sub-block `j` (0..8) of a Q4_K block from its 12 packed 6-bit bytes.
@@ -350,7 +440,8 @@ impl SendPtr {
     }
 }
 
-fn kernel() -> Kernel {
+/// The kernel chosen for this process (detected once).
+pub(crate) fn kernel() -> Kernel {
     static K: std::sync::OnceLock<Kernel> = std::sync::OnceLock::new();
     *K.get_or_init(Kernel::detect)
 }

@@ -77,13 +77,13 @@ pub fn dot<const NT: usize>(fmt: Format, w: &[u8], a: &[&[Q8Block]; NT]) -> [f32
         let ch = decode(fmt, w, c);
         for k in 0..NT {
             let b = &a[k][c];
-            let f = ch.f * b.d;
             for (l, lane) in lanes[k].iter_mut().enumerate() {
                 let mut s = 0i32;
                 for e in 4 * l..4 * l + 4 {
                     s += ch.q[e] * b.qs[e] as i32 * ch.sc[e / 16];
                 }
-                *lane = (s as f32).mul_add(f, *lane);
+                // (s · f) rounded, then fused with the activation scale, as the SIMD code does.
+                *lane = (s as f32 * ch.f).mul_add(b.d, *lane);
             }
             mins[k] += ch.min * b.s;
         }

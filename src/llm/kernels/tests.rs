@@ -76,7 +76,7 @@ fn simd_kernels_equal_the_scalar_ones_bit_for_bit() {
     }
     let mut rng = StdRng::seed_from_u64(11);
     for (dtype, fmt) in FORMATS {
-        for (cols, t) in [(256, 1), (768, 5), (1024, 9)] {
+        for (cols, t) in [(256, 1), (768, 3), (768, 5), (1024, 9), (512, 45)] {
             let (m, _) = quantised(&mut rng, dtype, 13, cols);
             let x = randn(&mut rng, t * cols);
             let mut q = Q8Acts::default();
@@ -136,5 +136,59 @@ fn activation_blocks_round_trip_within_half_a_step() {
         let isum: i32 = b.qs.iter().map(|&v| v as i32).sum();
         assert_eq!(b.s, b.d * isum as f32);
         assert!(a.iter().zip(r).all(|(a, r)| (a - r).abs() <= b.d * 0.5 + 1e-6));
+    }
+}
+
+#[test]
+fn f16_conversion_is_exact_for_every_bit_pattern() {
+    for h in 0..=u16::MAX {
+        let want = half::f16::from_bits(h).to_f32();
+        let got = f16(h as u8, (h >> 8) as u8);
+        assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{h:#06x}: {got} vs {want}");
+    }
+}
+
+#[test]
+fn attention_loops_simd_equal_portable_bit_for_bit() {
+    use super::attn::{AttnOps, Portable};
+    if !avx2::available() {
+        eprintln!("skipped: this CPU has no AVX2/FMA");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(13);
+    for hd in [64, 128, 72, 12] {
+        let (a, b) = (randn(&mut rng, hd), randn(&mut rng, hd));
+        // SAFETY: AVX2 and FMA are present (checked above).
+        let (x, y) = unsafe { (Portable::dot(&a, &b), attn::Avx2::dot(&a, &b)) };
+        assert_eq!(x.to_bits(), y.to_bits(), "dot, hd {hd}");
+        for keys in [1, 7, 40] {
+            let stride = hd + 24;
+            let values = randn(&mut rng, keys * stride);
+            let p = randn(&mut rng, keys);
+            let (mut y1, mut y2) = (vec![0f32; hd], vec![0f32; hd]);
+            // SAFETY: as above; values holds keys rows of `stride`.
+            unsafe {
+                Portable::weighted_sum(&mut y1, &p, &values, stride);
+                attn::Avx2::weighted_sum(&mut y2, &p, &values, stride);
+            }
+            assert!(y1.iter().zip(&y2).all(|(a, b)| a.to_bits() == b.to_bits()), "weighted sum, hd {hd}, {keys} keys");
+        }
+    }
+}
+
+#[test]
+fn rounding_matches_round_half_away_from_zero() {
+    let mut rng = StdRng::seed_from_u64(17);
+    let special = [0.0f32, -0.0, 0.5, -0.5, 1.5, 2.5, -2.5, 126.5, -126.5, 127.0, 0.49999997, -0.49999997, 2.4999998];
+    let random = (0..100_000).map(|_| rng.random_range(-130.0f32..130.0));
+    for v in special.into_iter().chain(random) {
+        assert_eq!(round_away(v), v.round() as i32, "{v}");
+    }
+    // Every half step in range, and its neighbours.
+    for i in -300..=300 {
+        let h = i as f32 * 0.5;
+        for v in [h, f32::from_bits(h.to_bits() + 1), f32::from_bits(h.to_bits().saturating_sub(1))] {
+            assert_eq!(round_away(v), v.round() as i32, "{v}");
+        }
     }
 }
