@@ -54,6 +54,48 @@ enum End {
     Abandoned(&'static str),
 }
 
+/// What a node's expansion keeps between its children.
+#[derive(Default)]
+struct NodeLoop {
+    /// The previous accepted child, with how it ended.
+    previous: Option<String>,
+    /// The last rejected or failed attempt, with why.
+    rejected: Option<String>,
+    /// Actions rejected since the state last changed (not proposed again until it does).
+    refused: Vec<Action>,
+    /// Actions this node has executed, in order.
+    done_here: Vec<Action>,
+    replans: usize,
+    children: usize,
+    accepted: usize,
+    /// After a subgoal of this node is rejected, given up or echoes the node's own goal, the node
+    /// proposes actions only until one runs: a greedy model otherwise writes the same subgoal again.
+    concrete_only: bool,
+}
+
+impl NodeLoop {
+    /// After the step `text` (action `a`) went to the executor: it ran (`Ok(summary)`), or the
+    /// symbolic check or the executor rejected it (`Err(reason)`) and the node proposes again.
+    fn executed(&mut self, text: &str, a: &Action, r: Result<String, String>, stats: &mut PlanStats) {
+        match r {
+            Ok(summary) => {
+                self.refused.clear();
+                self.done_here.push(a.clone());
+                self.accepted += 1;
+                self.concrete_only = false;
+                self.previous = Some(format!("{text}: {summary}"));
+                self.rejected = None;
+            }
+            Err(reason) => {
+                self.refused.push(a.clone());
+                self.replans += 1;
+                stats.replans += 1;
+                self.rejected = Some(rejection(text, &reason));
+            }
+        }
+    }
+}
+
 /// One run's state.
 pub(crate) struct Run<'a> {
     model: &'a mut dyn Generate,
@@ -289,57 +331,46 @@ impl Run<'_> {
     fn expand(&mut self, node: NodeId) -> Result<End, StopCause> {
         let depth = self.tree.node(node).depth;
         let budgets = self.cfg.budgets.clone();
-        // The previous accepted sibling, with how it ended, and the last rejected attempt.
-        let mut previous: Option<String> = None;
-        let mut rejected: Option<String> = None;
-        let mut refused: Vec<Action> = Vec::new();
-        // Actions this node has executed, in order.
-        let mut done_here: Vec<Action> = Vec::new();
-        let mut replans = 0usize;
-        let mut children = 0usize;
-        let mut accepted = 0usize;
-        // After a subgoal of this node is rejected, given up or echoes the node's own goal, the node
-        // proposes actions only until one runs: a greedy model otherwise writes the same subgoal again.
-        let mut concrete_only = false;
+        let mut st = NodeLoop::default();
         // The root is bounded by the run's budgets (calls, actions, deadline) alone: abandoning it
         // ends the run, and a plan needs more steps than a subgoal.
         let is_root = node == self.tree.root();
         loop {
-            if !is_root && replans > budgets.max_replans {
+            if !is_root && st.replans > budgets.max_replans {
                 return Ok(End::Abandoned("replans"));
             }
-            if !is_root && children >= budgets.max_children {
+            if !is_root && st.children >= budgets.max_children {
                 return Ok(End::Abandoned("children"));
             }
             self.check_global()?;
-            let view = self.view(node, previous.as_deref(), rejected.as_deref());
+            let view = self.view(node, st.previous.as_deref(), st.rejected.as_deref());
             // An action this node has just rejected is not proposed again until the state changes;
             // only exact sets can drop one. With `fresh_steps`, steps that repeat recent ones are
             // dropped too; without, at least the action the node has just executed (a greedy tiny
             // model otherwise repeats one step forever).
             let actions = match self.action_set()? {
                 ActionSet::Exact(list) => {
-                    let list: Vec<Action> = list.into_iter().filter(|a| !refused.contains(a)).collect();
+                    let list: Vec<Action> = list.into_iter().filter(|a| !st.refused.contains(a)).collect();
                     ActionSet::Exact(if self.cfg.fresh_steps {
-                        fresh_steps(list, &self.executed, &done_here)
+                        fresh_steps(list, &self.executed, &st.done_here)
                     } else {
-                        list.into_iter().filter(|a| done_here.last() != Some(a)).collect()
+                        list.into_iter().filter(|a| st.done_here.last() != Some(a)).collect()
                     })
                 }
                 set => set,
             };
             let allow_subgoal =
-                self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth && !concrete_only;
+                self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth && !st.concrete_only;
             // `done` before any step would end a goal with nothing done; it is offered once a child
             // has been accepted (or when nothing else can be written).
-            let allow_done = accepted > 0 || (!allow_subgoal && actions.is_empty());
+            let allow_done = st.accepted > 0 || (!allow_subgoal && actions.is_empty());
             let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done };
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
             let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
-                replans += 1;
+                st.replans += 1;
                 self.stats.replans += 1;
-                rejected = Some("(no answer within the token limit)".into());
+                st.rejected = Some("(no answer within the token limit)".into());
                 continue;
             };
             let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e.to_string()))?;
@@ -355,14 +386,14 @@ impl Run<'_> {
                 Proposal::Action(a) => (a.to_string(), Some(a.clone())),
             };
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
-            children += 1;
+            st.children += 1;
             self.node_event(child);
             if child_action.is_none() && echoes(&child_text, &self.tree.node(node).text) {
                 self.set_status(child, Status::Replanned, "congruence: it repeats its parent's goal");
-                replans += 1;
+                st.replans += 1;
                 self.stats.replans += 1;
-                concrete_only = true;
-                rejected = Some(format!("{child_text}: it repeats the goal; give one action"));
+                st.concrete_only = true;
+                st.rejected = Some(format!("{child_text}: it repeats the goal; give one action"));
                 continue;
             }
             // With the symbolic checks on, the world decides whether a proposed action can run now
@@ -372,22 +403,8 @@ impl Run<'_> {
             // were found to reject nearly every action, copying the prompt's text as the reason).
             if let (Some(a), true, false) = (&child_action, self.cfg.symbolic_check, self.cfg.judge_actions) {
                 self.set_status(child, Status::Mapped { action: a.clone() }, "an action (the world checks it)");
-                match self.execute(child, a)? {
-                    Ok(summary) => {
-                        refused.clear();
-                        done_here.push(a.clone());
-                        accepted += 1;
-                        concrete_only = false;
-                        previous = Some(format!("{child_text}: {summary}"));
-                        rejected = None;
-                    }
-                    Err(reason) => {
-                        refused.push(a.clone());
-                        replans += 1;
-                        self.stats.replans += 1;
-                        rejected = Some(rejection(&child_text, &reason));
-                    }
-                }
+                let r = self.execute(child, a)?;
+                st.executed(&child_text, a, r, &mut self.stats);
                 continue;
             }
 
@@ -418,69 +435,55 @@ impl Run<'_> {
             let prompt = self.prompter.terminate(&view, &text);
             let Some(vtext) = self.call("terminate", child, &prompt, &lark)? else {
                 self.set_status(child, Status::Replanned, "no verdict within the token limit");
-                replans += 1;
+                st.replans += 1;
                 self.stats.replans += 1;
-                rejected = Some(format!("{child_text}: no verdict within the token limit"));
+                st.rejected = Some(format!("{child_text}: no verdict within the token limit"));
                 continue;
             };
             let verdict = vg.parse(&vtext).map_err(|e| grammar_error("terminate", child, &vtext, &e.to_string()))?;
             self.trace.event("verdict", json!({"node": child, "verdict": vtext}));
             match verdict {
                 Verdict::Replan { cause, reason } => {
-                    refused.extend(child_action.clone());
-                    concrete_only |= child_action.is_none();
+                    st.refused.extend(child_action.clone());
+                    st.concrete_only |= child_action.is_none();
                     self.set_status(child, Status::Replanned, format!("{cause}: {reason}"));
-                    replans += 1;
+                    st.replans += 1;
                     self.stats.replans += 1;
-                    rejected = Some(rejection(&child_text, &reason));
+                    st.rejected = Some(rejection(&child_text, &reason));
                 }
                 Verdict::Decompose if depth + 1 >= budgets.max_depth => {
                     // Unreachable under the grammar (decompose is not offered this deep); kept so a
                     // model that ignores grammars still cannot exceed the depth budget.
                     self.set_status(child, Status::Replanned, "depth budget: too deep to decompose");
-                    replans += 1;
+                    st.replans += 1;
                     self.stats.replans += 1;
-                    rejected = Some(format!("{child_text}: too vague; propose one action"));
+                    st.rejected = Some(format!("{child_text}: too vague; propose one action"));
                 }
                 Verdict::Decompose => {
                     self.set_status(child, Status::Decomposing, "not one action");
                     match self.expand(child)? {
                         End::Complete => {
                             self.set_status(child, Status::Executed, "all its steps are done");
-                            accepted += 1;
-                            previous = Some(format!("{child_text}: done"));
-                            rejected = None;
+                            st.accepted += 1;
+                            st.previous = Some(format!("{child_text}: done"));
+                            st.rejected = None;
                         }
                         End::Abandoned(budget) => {
                             self.stats.abandoned += 1;
                             self.set_status(child, Status::Abandoned, format!("{budget} budget"));
                             // The parent goes on, told that this step was given up; it counts as a
                             // rejected attempt so a parent cannot abandon children forever.
-                            replans += 1;
-                            concrete_only = true;
-                            previous = Some(format!("{child_text}: given up"));
-                            rejected = None;
+                            st.replans += 1;
+                            st.concrete_only = true;
+                            st.previous = Some(format!("{child_text}: given up"));
+                            st.rejected = None;
                         }
                     }
                 }
                 Verdict::Execute(a) => {
                     self.set_status(child, Status::Mapped { action: a.clone() }, "one action");
-                    match self.execute(child, &a)? {
-                        Ok(summary) => {
-                            refused.clear();
-                            done_here.push(a.clone());
-                            accepted += 1;
-                            concrete_only = false;
-                            previous = Some(format!("{child_text}: {summary}"));
-                            rejected = None;
-                        }
-                        Err(reason) => {
-                            refused.push(a.clone());
-                            replans += 1;
-                            self.stats.replans += 1;
-                            rejected = Some(rejection(&child_text, &reason));
-                        }
-                    }
+                    let r = self.execute(child, &a)?;
+                    st.executed(&child_text, &a, r, &mut self.stats);
                 }
             }
         }
