@@ -136,14 +136,12 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         roles.entry(c.role.to_string()).or_default().push(c);
     }
     let by_role: BTreeMap<String, Group> = roles.iter().map(|(k, v)| (k.clone(), group(v))).collect();
-    // Per node: the calls of one (task, node) merged into one record.
-    let mut merged: BTreeMap<(usize, usize), CallRecord> = BTreeMap::new();
+    // Per node: a proposed child's decomposition call merged with the calls that judged or scored
+    // it (merging by the calls' node would charge a parent with all its children's proposals).
+    let mut merged: Vec<(usize, CallRecord)> = Vec::new();
     for (t, c) in &calls {
-        match merged.get_mut(&(*t, c.node)) {
-            None => {
-                merged.insert((*t, c.node), c.clone());
-            }
-            Some(m) => {
+        match merged.last_mut() {
+            Some((task, m)) if *task == *t && c.role != "decompose" && c.role != "flat" => {
                 m.prompt_tokens += c.prompt_tokens;
                 m.reused_tokens += c.reused_tokens;
                 m.output_tokens += c.output_tokens;
@@ -152,9 +150,10 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
                 m.mask_ms += c.mask_ms;
                 m.total_ms += c.total_ms;
             }
+            _ => merged.push((*t, c.clone())),
         }
     }
-    let node_refs: Vec<&CallRecord> = merged.values().collect();
+    let node_refs: Vec<&CallRecord> = merged.iter().map(|(_, c)| c).collect();
     let report = NodesReport {
         model: path.display().to_string(),
         planner: a.planner.to_string(),
