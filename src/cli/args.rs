@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use crate::eval::TaskSource;
+use crate::planner::{ActionChoice, PlannerConfig};
 use crate::program::PlanFormat;
 
 /// Where tasks come from (the commands that take tasks).
@@ -91,4 +92,31 @@ pub fn read_input(path: &std::path::Path, what: &str) -> anyhow::Result<String> 
         std::fs::read_to_string(path).with_context(|| format!("cannot read {what} {}", path.display()))?
     };
     Ok(crate::program::strip_bom(&text).to_string())
+}
+
+/// How the tree planner makes its decisions (`plan` and `eval plan`); the defaults are
+/// [`PlannerConfig`]'s.
+#[derive(Args, Debug, Clone)]
+pub struct DecisionArgs {
+    /// Ask the termination model about actions the world already found runnable (congruence only).
+    #[arg(long)]
+    pub judge_actions: bool,
+    /// Offer every feasible step (by default a walk right after a walk, the run's last three
+    /// actions and what the node has already done are not offered again while anything else can be
+    /// done; the random planner obeys the same rule).
+    #[arg(long)]
+    pub allow_repeats: bool,
+    /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
+    /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
+    #[arg(long, default_value = "generate")]
+    pub choose: ActionChoice,
+}
+
+impl DecisionArgs {
+    /// Sets these choices in `cfg`.
+    pub fn apply(&self, cfg: &mut PlannerConfig) {
+        cfg.judge_actions = self.judge_actions;
+        cfg.fresh_steps = !self.allow_repeats;
+        cfg.choose = self.choose;
+    }
 }

@@ -79,21 +79,12 @@ pub struct PlanArgs {
     /// Turn off the symbolic check of execute verdicts (on by default).
     #[arg(long)]
     pub no_symbolic_check: bool,
-    /// Ask the termination model about actions the world already found runnable (congruence only).
-    #[arg(long)]
-    pub judge_actions: bool,
-    /// Offer every feasible step (by default a walk right after a walk, and the last three actions,
-    /// are not offered again when anything else can be done; the random planner obeys the same rule).
-    #[arg(long)]
-    pub allow_repeats: bool,
+    #[command(flatten)]
+    pub rules: super::args::DecisionArgs,
     /// On EAI's tasks, also offer the actions EAI's own scorer cannot score (SLEEP, WAKEUP,
     /// LOOKAT_SHORT, LOOKAT_LONG); they are left out by default so `--export-eai` plans can be scored.
     #[arg(long)]
     pub all_verbs: bool,
-    /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
-    /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
-    #[arg(long, default_value = "generate")]
-    pub choose: crate::planner::ActionChoice,
     /// Write one JSON-lines trace per task here (<id>.jsonl).
     #[arg(long, value_name = "DIR")]
     pub trace_dir: Option<PathBuf>,
@@ -161,7 +152,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("creating the trace directory {}", d.display()))?;
     }
     let defaults = PlannerConfig::default();
-    let cfg = PlanEvalConfig {
+    let mut cfg = PlanEvalConfig {
         planner: PlannerConfig {
             kind: a.planner,
             strength: a.grammar,
@@ -173,9 +164,6 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             symbolic_check: !a.no_symbolic_check,
             random_seed: a.seed,
             random_actions: a.random_actions,
-            judge_actions: a.judge_actions,
-            fresh_steps: !a.allow_repeats,
-            choose: a.choose,
             excluded_verbs: if source.tasks_file.is_none() && !a.all_verbs {
                 crate::eval::plans::EAI_UNSCOREABLE.to_vec()
             } else {
@@ -187,6 +175,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
         env: a.env,
         trace_dir: a.trace_dir.clone(),
     };
+    a.rules.apply(&mut cfg.planner);
     let mut model: Box<dyn Generate> = if a.planner == PlannerKind::Random {
         Box::new(NoModel)
     } else {

@@ -74,17 +74,8 @@ pub struct PlanArgs {
     /// Do not check execute verdicts against the world before executing them.
     #[arg(long)]
     pub no_symbolic_check: bool,
-    /// Ask the termination model about actions the world already found runnable (congruence only).
-    #[arg(long)]
-    pub judge_actions: bool,
-    /// Offer every feasible step (by default a walk right after a walk, and the last three actions,
-    /// are not offered again when anything else can be done; the random planner obeys the same rule).
-    #[arg(long)]
-    pub allow_repeats: bool,
-    /// How the action of an `action:` proposal is chosen: `score` ranks every action the grammar
-    /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
-    #[arg(long, default_value = "generate")]
-    pub choose: crate::planner::ActionChoice,
+    #[command(flatten)]
+    pub rules: super::args::DecisionArgs,
     /// Most tokens per model answer.
     #[arg(long, default_value_t = PlannerConfig::default().gen.max_tokens)]
     pub max_tokens: usize,
@@ -236,15 +227,13 @@ fn config(args: &PlanArgs) -> anyhow::Result<PlannerConfig> {
         },
         symbolic_check: !args.no_symbolic_check,
         oracle_stop: args.oracle_stop,
-        judge_actions: args.judge_actions,
-        fresh_steps: !args.allow_repeats,
-        choose: args.choose,
         ..PlannerConfig::default()
     };
     if args.max_depth == 0 {
         bail!("--max-depth must be at least 1 (the instruction's own steps)");
     }
     cfg.gen.max_tokens = args.max_tokens;
+    args.rules.apply(&mut cfg);
     if let Some(seed) = args.seed {
         cfg.gen.sampling = Sampling::Sample { temperature: 0.7, top_p: 0.95, seed };
     }
