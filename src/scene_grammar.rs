@@ -41,9 +41,13 @@ pub fn typed_set(world: &World, ids: &[u32]) -> ActionSet {
     ActionSet::Slots(verbs, objects)
 }
 
-/// `feasible`: exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]).
+/// `feasible`: exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]),
+/// less those that name one object twice (a toothbrush put on itself): the executor, like EAI's,
+/// lets them run, but no robot can do them, and a tiny model was seen writing them.
 pub fn feasible_set(world: &World, ids: &[u32]) -> ActionSet {
-    ActionSet::Exact(world.feasible_actions_among(ids))
+    let mut list = world.feasible_actions_among(ids);
+    list.retain(|a| !(a.args.len() == 2 && a.args[0].id == a.args[1].id));
+    ActionSet::Exact(list)
 }
 
 /// The action set of the given strength over the objects `ids` of `world`.

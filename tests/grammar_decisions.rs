@@ -37,16 +37,18 @@ fn random_scene(seed: u64, steps: usize, focus: usize) -> (World, Vec<u32>) {
     (w, ids)
 }
 
+const MENU: [&str; 3] = ["apple is INSIDE to fridge", "say \"done\" \\ twice", "WATCH or LOOKAT"];
+
 #[derive(Debug, Clone, Copy)]
 enum Kind {
-    Decompose { subgoal: bool, done: bool },
+    Decompose { subgoal: bool, done: bool, menu: bool },
     Verdict { decompose: bool },
     Plan { max_lines: usize },
 }
 
 fn kind() -> impl Strategy<Value = Kind> {
     prop_oneof![
-        (any::<bool>(), any::<bool>()).prop_map(|(subgoal, done)| Kind::Decompose { subgoal, done }),
+        (any::<bool>(), any::<bool>(), any::<bool>()).prop_map(|(subgoal, done, menu)| Kind::Decompose { subgoal, done, menu }),
         any::<bool>().prop_map(|decompose| Kind::Verdict { decompose }),
         (1usize..4).prop_map(|max_lines| Kind::Plan { max_lines }),
     ]
@@ -64,8 +66,10 @@ type Checker = dyn Fn(&str) -> Result<Vec<Action>, String>;
 fn decision(kind: Kind, set: ActionSet, chars: usize) -> Result<Decision, String> {
     let err = |e: step::grammar::GrammarError| e.to_string();
     Ok(match kind {
-        Kind::Decompose { subgoal, done } => {
-            let g = DecomposeGrammar { actions: set, subgoal_chars: chars, allow_subgoal: subgoal, allow_done: done };
+        Kind::Decompose { subgoal, done, menu } => {
+            // Offered subgoal lines, quotes and backslashes included, must reach the grammar unchanged.
+            let subgoal_menu = if menu { MENU.iter().map(|s| s.to_string()).collect() } else { Vec::new() };
+            let g = DecomposeGrammar { actions: set, subgoal_chars: chars, allow_subgoal: subgoal, allow_done: done, subgoal_menu };
             Decision {
                 lark: g.to_lark().map_err(err)?,
                 check: Box::new(move |t| {
@@ -157,7 +161,7 @@ proptest! {
                 // over an empty set; and a decomposition with everything switched off.
                 let expected = match kind {
                     Kind::Plan { .. } | Kind::Verdict { decompose: false } => empty,
-                    Kind::Decompose { subgoal, done } => empty && !subgoal && !done,
+                    Kind::Decompose { subgoal, done, .. } => empty && !subgoal && !done,
                     Kind::Verdict { decompose: true } => false,
                 };
                 prop_assert!(expected, "{kind:?} {strength}: unexpected grammar error {e}");

@@ -110,6 +110,14 @@ pub struct DecisionArgs {
     /// admits by likelihood (feasible grammar), `generate` keeps what the model wrote.
     #[arg(long, default_value = "generate")]
     pub choose: ActionChoice,
+    /// Let the root write its own subgoals even when the protocol shows the goals (by default each
+    /// goal line is offered as a subgoal, and the root chooses among them).
+    #[arg(long)]
+    pub free_subgoals: bool,
+    /// Let a subgoal's actions name any object of the focus (by default they name the objects its
+    /// text names, and what holds them, when it names any).
+    #[arg(long)]
+    pub no_subgoal_focus: bool,
 }
 
 impl DecisionArgs {
@@ -118,5 +126,7 @@ impl DecisionArgs {
         cfg.judge_actions = self.judge_actions;
         cfg.fresh_steps = !self.allow_repeats;
         cfg.choose = self.choose;
+        cfg.goal_subgoals = !self.free_subgoals;
+        cfg.subgoal_focus = !self.no_subgoal_focus;
     }
 }

@@ -70,6 +70,10 @@ pub struct PlanArgs {
     /// Actions the random planner executes before it stops.
     #[arg(long, default_value_t = DEFAULT_RANDOM_ACTIONS)]
     pub random_actions: usize,
+    /// Actions the random planner executes under each offered subgoal (goal line) before it says
+    /// `done` there.
+    #[arg(long, default_value_t = 6)]
+    pub random_steps: usize,
     /// Most actions a run may send to the executor.
     #[arg(long, default_value_t = 60)]
     pub max_actions: usize,
@@ -164,6 +168,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             symbolic_check: !a.no_symbolic_check,
             random_seed: a.seed,
             random_actions: a.random_actions,
+            random_steps: a.random_steps,
             excluded_verbs: if source.tasks_file.is_none() && !a.all_verbs {
                 crate::eval::plans::EAI_UNSCOREABLE.to_vec()
             } else {

@@ -397,6 +397,10 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         .as_array()
         .map(|a| a.iter().filter_map(|x| x.as_u64().map(|n| n as u32)).collect())
         .unwrap_or_default();
+    req.subgoals = r["subgoals"]
+        .as_array()
+        .map(|a| a.iter().filter_map(|x| x.as_str().map(str::to_string)).collect())
+        .unwrap_or_default();
     let env_name = h["env"].as_str().unwrap_or("sim");
     let mut env = make_env(env_name, world, req.focus.clone())?;
     let model = match &args.model {

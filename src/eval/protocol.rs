@@ -178,32 +178,71 @@ pub fn objects_text(task: &Task) -> String {
 /// joined by `or`. (EAI's own prompt writes each action-goal line twice, once as `A or B` and once as
 /// `A|B`; here each is written once.)
 pub fn goals_text(task: &Task) -> String {
-    let g = &task.goal;
-    let w = &task.world;
+    let lines = GoalLines::of(task);
     let mut out = String::from("Goal states:\n");
-    if g.nodes.is_empty() {
-        out.push_str("(none)\n");
-    }
-    for n in &g.nodes {
-        out.push_str(&format!("{} is {}\n", n.class_name, n.state.name()));
-    }
+    let section = |out: &mut String, lines: &[String], none: &str| {
+        if lines.is_empty() {
+            out.push_str(none);
+            out.push('\n');
+        }
+        for l in lines {
+            out.push_str(l);
+            out.push('\n');
+        }
+    };
+    section(&mut out, &lines.states, "(none)");
     out.push_str("Goal relations:\n");
-    if g.edges.is_empty() {
-        out.push_str("(none)\n");
-    }
-    for e in &g.edges {
-        out.push_str(&format!("{} is {} to {}\n", name(w, e.from_id), e.relation_type.name(), name(w, e.to_id)));
-    }
+    section(&mut out, &lines.relations, "(none)");
     out.push_str("Actions the plan must include, in this order:\n");
-    if g.actions.is_empty() {
-        out.push_str("(no action requirement)\n");
-    }
-    for a in &g.actions {
-        let names: Vec<&str> = a.any_of.iter().map(|v| v.name()).collect();
-        out.push_str(&names.join(" or "));
-        out.push('\n');
-    }
+    section(&mut out, &lines.actions, "(no action requirement)");
     out
+}
+
+/// A task's goal conditions, one line each, in the words of [`goals_text`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct GoalLines {
+    pub states: Vec<String>,
+    pub relations: Vec<String>,
+    pub actions: Vec<String>,
+}
+
+impl GoalLines {
+    pub fn of(task: &Task) -> GoalLines {
+        let (g, w) = (&task.goal, &task.world);
+        GoalLines {
+            states: g.nodes.iter().map(|n| format!("{} is {}", n.class_name, n.state.name())).collect(),
+            relations: g
+                .edges
+                .iter()
+                .map(|e| format!("{} is {} to {}", name(w, e.from_id), e.relation_type.name(), name(w, e.to_id)))
+                .collect(),
+            actions: g
+                .actions
+                .iter()
+                .map(|a| a.any_of.iter().map(|v| v.name()).collect::<Vec<_>>().join(" or "))
+                .collect(),
+        }
+    }
+
+    /// Every line, states first, without repeats: the subgoals a planner shown the goals is offered.
+    pub fn all(&self) -> Vec<String> {
+        let mut out: Vec<String> = Vec::new();
+        for l in self.states.iter().chain(&self.relations).chain(&self.actions) {
+            if !out.contains(l) {
+                out.push(l.clone());
+            }
+        }
+        out
+    }
+}
+
+/// The subgoals offered to the root under `seen`: the goal lines when the planner is shown the
+/// goals, else none (it writes its own).
+pub fn subgoals(task: &Task, seen: Seen) -> Vec<String> {
+    match seen {
+        Seen::Goals => GoalLines::of(task).all(),
+        Seen::Instruction | Seen::Objects => Vec::new(),
+    }
 }
 
 /// `PlanRequest.context` for a task under `seen`: nothing for `instruction`; the objects for
@@ -256,6 +295,21 @@ mod tests {
             instruction(tv),
             "Watch TV. Go to the living room, switch on the television, sit on the sofa and watch."
         );
+    }
+
+    #[test]
+    fn the_offered_subgoals_are_the_goal_lines_under_goals_only() {
+        let tasks = demo_tasks();
+        let apple = tasks.iter().find(|t| t.id == "apple_in_fridge").unwrap();
+        assert!(subgoals(apple, Seen::Instruction).is_empty() && subgoals(apple, Seen::Objects).is_empty());
+        let lines = subgoals(apple, Seen::Goals);
+        assert!(lines.contains(&"apple is INSIDE to fridge".to_string()), "{lines:?}");
+        assert!(lines.contains(&"fridge is CLOSED".to_string()), "{lines:?}");
+        // Every offered line is a line of the goals text the prompt shows.
+        let text = goals_text(apple);
+        assert!(lines.iter().all(|l| text.lines().any(|t| t == l)), "{lines:?}\n{text}");
+        let tv = tasks.iter().find(|t| t.id == "watch_tv").unwrap();
+        assert!(subgoals(tv, Seen::Goals).contains(&"LOOKAT or WATCH".to_string()));
     }
 
     #[test]

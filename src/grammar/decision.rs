@@ -425,6 +425,9 @@ pub struct DecomposeGrammar {
     pub subgoal_chars: usize,
     pub allow_subgoal: bool,
     pub allow_done: bool,
+    /// When not empty, a subgoal is exactly one of these lines (e.g. a task's goals in words)
+    /// instead of free text of at most `subgoal_chars`.
+    pub subgoal_menu: Vec<String>,
 }
 
 /// A parsed decomposition output.
@@ -438,14 +441,22 @@ pub enum Proposal {
 impl DecomposeGrammar {
     /// Subgoals, actions from `actions` and `done` all allowed.
     pub fn new(actions: ActionSet, subgoal_chars: usize) -> Self {
-        Self { actions, subgoal_chars, allow_subgoal: true, allow_done: true }
+        Self { actions, subgoal_chars, allow_subgoal: true, allow_done: true, subgoal_menu: Vec::new() }
     }
 
     pub fn to_lark(&self) -> Result<String, GrammarError> {
         let mut g = String::from(HEADER);
         let mut rules = String::new();
         let mut alts = Vec::new();
-        if self.allow_subgoal {
+        if self.allow_subgoal && !self.subgoal_menu.is_empty() {
+            if let Some(bad) = self.subgoal_menu.iter().find(|l| l.trim().is_empty() || l.contains(['\n', '\r'])) {
+                return Err(GrammarError::Shape(format!(
+                    "subgoal line {bad:?} is empty or spans lines; give each offered subgoal as one non-empty line"
+                )));
+            }
+            let lines: Vec<String> = self.subgoal_menu.iter().map(|l| lark_string(l)).collect();
+            alts.push(format!("{} ({})", lark_string("subgoal: "), lines.join(" | ")));
+        } else if self.allow_subgoal {
             check_text_limit("the subgoal", self.subgoal_chars)?;
             alts.push(format!("{} {}", lark_string("subgoal: "), text_regex(self.subgoal_chars)));
         }
@@ -480,7 +491,11 @@ impl DecomposeGrammar {
             if !self.allow_subgoal {
                 return Err(err1(text, "a subgoal is not allowed here"));
             }
-            check_text(text, s, self.subgoal_chars)?;
+            if self.subgoal_menu.is_empty() {
+                check_text(text, s, self.subgoal_chars)?;
+            } else if !self.subgoal_menu.iter().any(|l| l == s) {
+                return Err(err1(text, "the subgoal is not one of the offered lines"));
+            }
             return Ok(Proposal::Subgoal(s.to_string()));
         }
         if let Some(body) = text.strip_prefix("action: ") {
@@ -778,6 +793,25 @@ mod tests {
         assert!(only_actions.parse("subgoal: x").is_err());
         let lark = only_actions.to_lark().unwrap();
         assert!(lark.contains(r#"start: "action: " action"#) && !lark.contains("subgoal"), "{lark}");
+    }
+
+    #[test]
+    fn an_offered_subgoal_is_one_of_the_lines_exactly() {
+        let g = DecomposeGrammar {
+            subgoal_menu: vec!["apple is INSIDE to fridge".into(), "tv is ON".into()],
+            ..DecomposeGrammar::new(ActionSet::Exact(vec![act(Verb::Open, &[("fridge", 10)])]), 20)
+        };
+        // Longer than subgoal_chars, still accepted: the lines are given, not written.
+        assert_eq!(g.parse("subgoal: apple is INSIDE to fridge").unwrap(), Proposal::Subgoal("apple is INSIDE to fridge".into()));
+        let e = g.parse("subgoal: tv is OFF").unwrap_err().to_string();
+        assert!(e.contains("not one of the offered lines"), "{e}");
+        let lark = g.to_lark().unwrap();
+        assert!(lark.contains(r#""subgoal: " ("apple is INSIDE to fridge" | "tv is ON")"#), "{lark}");
+        let bad = DecomposeGrammar { subgoal_menu: vec!["two\nlines".into()], ..g.clone() };
+        assert!(bad.to_lark().unwrap_err().to_string().contains("spans lines"));
+        // Without subgoals allowed, the menu is not offered.
+        let off = DecomposeGrammar { allow_subgoal: false, ..g };
+        assert!(!off.to_lark().unwrap().contains("subgoal") && off.parse("subgoal: tv is ON").is_err());
     }
 
     #[test]

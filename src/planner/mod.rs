@@ -89,6 +89,9 @@ pub struct PlanRequest {
     pub context: Option<String>,
     /// Object ids grammars may name (the task's relevant objects, or the whole scene).
     pub focus: Vec<u32>,
+    /// Subgoals offered to the root's decomposition, one line each (a task's goals in words, when the
+    /// protocol shows them): the root's subgoals are chosen among these instead of written freely.
+    pub subgoals: Vec<String>,
     /// DIAGNOSTIC ONLY, an oracle: a goal check the loop may stop at (with `PlannerConfig::oracle_stop`).
     /// A planner that stops because the scorer's goals hold is not deciding when to stop; figures
     /// obtained with it must be labelled as oracle figures and never reported as the planner's.
@@ -97,7 +100,7 @@ pub struct PlanRequest {
 
 impl PlanRequest {
     pub fn new(instruction: impl Into<String>, focus: Vec<u32>) -> PlanRequest {
-        PlanRequest { instruction: instruction.into(), context: None, focus, oracle: None }
+        PlanRequest { instruction: instruction.into(), context: None, focus, subgoals: Vec::new(), oracle: None }
     }
 }
 
@@ -107,6 +110,7 @@ impl std::fmt::Debug for PlanRequest {
             .field("instruction", &self.instruction)
             .field("context", &self.context)
             .field("focus", &self.focus)
+            .field("subgoals", &self.subgoals)
             .field("oracle", &self.oracle.is_some())
             .finish()
     }
@@ -154,8 +158,16 @@ pub struct PlannerConfig {
     pub gen: GenOptions,
     /// Seed of the `random` planner.
     pub random_seed: u64,
-    /// Actions the `random` planner executes before it stops.
+    /// Actions the `random` planner executes before it stops (when the request offers no subgoals).
     pub random_actions: usize,
+    /// Actions the `random` planner executes under each offered subgoal before it says `done` there.
+    pub random_steps: usize,
+    /// Below the root, a node's actions name only the objects its text names (and what holds them);
+    /// see `planner::Run::node_focus`.
+    pub subgoal_focus: bool,
+    /// When the protocol shows the goals, offer them to the root as its subgoals (one per goal line)
+    /// instead of letting it write its own.
+    pub goal_subgoals: bool,
     /// DIAGNOSTIC ONLY: stop when `PlanRequest::oracle` says the goal holds (see there).
     pub oracle_stop: bool,
     /// Ask the termination model about an action the symbolic check already found runnable (it can
@@ -187,6 +199,9 @@ impl Default for PlannerConfig {
             gen: GenOptions { max_tokens: 48, ..GenOptions::default() },
             random_seed: 0,
             random_actions: 30,
+            random_steps: 6,
+            subgoal_focus: true,
+            goal_subgoals: true,
             oracle_stop: false,
             judge_actions: false,
             fresh_steps: true,
@@ -391,6 +406,9 @@ impl PlannerConfig {
             "reuse_prefix": self.gen.reuse_prefix,
             "random_seed": self.random_seed,
             "random_actions": self.random_actions,
+            "random_steps": self.random_steps,
+            "subgoal_focus": self.subgoal_focus,
+            "goal_subgoals": self.goal_subgoals,
             "oracle_stop": self.oracle_stop,
             "judge_actions": self.judge_actions,
             "fresh_steps": self.fresh_steps,
@@ -449,12 +467,17 @@ impl PlannerConfig {
         if let Some(n) = usize_of(v, "random_actions")? {
             c.random_actions = n;
         }
+        if let Some(n) = usize_of(v, "random_steps")? {
+            c.random_steps = n;
+        }
         if let Some(x) = v.get("oracle_stop").and_then(Value::as_bool) {
             c.oracle_stop = x;
         }
         // Traces written before these settings existed ran with them as shown.
         c.judge_actions = v.get("judge_actions").and_then(Value::as_bool).unwrap_or(true);
         c.fresh_steps = v.get("fresh_steps").and_then(Value::as_bool).unwrap_or(false);
+        c.subgoal_focus = v.get("subgoal_focus").and_then(Value::as_bool).unwrap_or(false);
+        c.goal_subgoals = v.get("goal_subgoals").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,
@@ -496,6 +519,7 @@ pub fn plan(
         "meta": trace.meta().clone(),
         "settings": cfg.to_json(),
         "request": {"instruction": req.instruction, "context": req.context, "focus": req.focus,
+                    "subgoals": req.subgoals,
                     "oracle": req.oracle.is_some() && cfg.oracle_stop},
         "env": env.name(),
         "observation": env.observe(cfg.observe_budget),
@@ -506,6 +530,9 @@ pub fn plan(
             planner::run_tree(model, env, req, cfg, trace)
         }
         PlannerKind::Flat => baseline::flat(model, env, req, cfg, trace),
+        // With offered subgoals, the random chooser walks the same tree as the model (one subgoal at
+        // a time, each node's actions over its own objects); without, it draws over the whole focus.
+        PlannerKind::Random if !req.subgoals.is_empty() => planner::run_tree(model, env, req, cfg, trace),
         PlannerKind::Random => baseline::random(env, req, cfg, trace),
     };
     trace.event(

@@ -11,6 +11,8 @@
 
 use std::time::Instant;
 
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
 use serde_json::json;
 use sha2::{Digest, Sha256};
 
@@ -23,6 +25,7 @@ use super::{ActionChoice, CallRecord, PlanOutcome, PlanRequest, PlanStats, Plann
 use crate::action::Action;
 use crate::llm::engine::{Generate, Prompt, Score, StopReason};
 use crate::llm::LlmError;
+use crate::world::vocab::Relation;
 use crate::world::World;
 
 /// How the context of each decision is made (the paper's ablations).
@@ -71,6 +74,8 @@ struct NodeLoop {
     /// After a subgoal of this node is rejected, given up or echoes the node's own goal, the node
     /// proposes actions only until one runs: a greedy model otherwise writes the same subgoal again.
     concrete_only: bool,
+    /// The offered subgoal lines (the root's menu) already taken, done or given up.
+    tried: Vec<String>,
 }
 
 impl NodeLoop {
@@ -110,6 +115,8 @@ pub(crate) struct Run<'a> {
     stats: PlanStats,
     executed: Vec<Action>,
     start: Instant,
+    /// The `random` planner's chooser, in place of the model (see [`Run::draw`]).
+    rng: Option<StdRng>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -138,6 +145,7 @@ pub(crate) fn run_tree(
         stats: PlanStats::default(),
         executed: Vec::new(),
         start: Instant::now(),
+        rng: (cfg.kind == PlannerKind::Random).then(|| StdRng::seed_from_u64(cfg.random_seed)),
     };
     run.node_event(0);
     let root = run.tree.root();
@@ -200,8 +208,42 @@ impl Run<'_> {
         })
     }
 
-    fn action_set(&self) -> Result<ActionSet, StopCause> {
-        Ok(self.cfg.action_set(self.cfg.strength, self.world()?, &self.focus))
+    /// The actions a decision at `node` may write: the strength's set over the node's objects.
+    fn action_set(&self, node: NodeId) -> Result<ActionSet, StopCause> {
+        Ok(self.cfg.action_set(self.cfg.strength, self.world()?, &self.node_focus(node)?))
+    }
+
+    /// The objects a decision at `node` may name. With `subgoal_focus`: the focus objects the node's
+    /// text names, by class name or `(id)`, with the objects holding them (inside or on), so a
+    /// subgoal's choices are about what it is about; a text that names none keeps the whole focus.
+    /// The root does so only when its focus is the whole scene.
+    fn node_focus(&self, node: NodeId) -> Result<Vec<u32>, StopCause> {
+        let w = self.world()?;
+        // The root keeps a focus the request narrowed (a task's relevant objects); over the whole
+        // scene, it too is narrowed to what its instruction names.
+        let scene_wide = || {
+            let n = w.nodes().filter(|n| n.id != w.character()).count();
+            self.focus.iter().filter(|&&id| id != w.character()).count() >= n
+        };
+        if !self.cfg.subgoal_focus || (node == self.tree.root() && !scene_wide()) {
+            return Ok(self.focus.clone());
+        }
+        let named = named_objects(w, &self.focus, &self.tree.node(node).text);
+        if named.is_empty() {
+            return Ok(self.focus.clone());
+        }
+        let mut out = named.clone();
+        for (from, r, to) in w.edges() {
+            if named.contains(&from)
+                && matches!(r, Relation::Inside | Relation::On)
+                && self.focus.contains(&to)
+                && !out.contains(&to)
+                && !w.node(to).is_some_and(|n| n.is_room())
+            {
+                out.push(to);
+            }
+        }
+        Ok(out)
     }
 
     /// The context of a decision at `node`.
@@ -348,30 +390,72 @@ impl Run<'_> {
             // only exact sets can drop one. With `fresh_steps`, steps that repeat recent ones are
             // dropped too; without, at least the action the node has just executed (a greedy tiny
             // model otherwise repeats one step forever).
-            let actions = match self.action_set()? {
+            let actions = match self.action_set(node)? {
                 ActionSet::Exact(list) => {
                     let list: Vec<Action> = list.into_iter().filter(|a| !st.refused.contains(a)).collect();
                     ActionSet::Exact(if self.cfg.fresh_steps {
-                        fresh_steps(list, &self.executed, &st.done_here)
+                        let fresh = fresh_steps(list, &self.executed, &st.done_here);
+                        // A node that has taken steps and has nothing new left to do is offered
+                        // `done` (or a subgoal) rather than a repeat.
+                        if st.accepted > 0 && fresh.iter().all(|a| st.done_here.contains(a) || self.executed[self.executed.len().saturating_sub(RECENT)..].contains(a)) {
+                            Vec::new()
+                        } else {
+                            fresh
+                        }
                     } else {
                         list.into_iter().filter(|a| st.done_here.last() != Some(a)).collect()
                     })
                 }
                 set => set,
             };
-            let allow_subgoal =
-                self.mode != ContextMode::NoSubgoalTree && depth + 1 < budgets.max_depth && !st.concrete_only;
+            // The root's subgoals are the request's offered lines (a task's goals in words) not yet
+            // taken; once all are taken it proposes actions or `done`.
+            let offered = is_root && !self.req.subgoals.is_empty();
+            let subgoal_menu: Vec<String> = if offered {
+                self.req.subgoals.iter().filter(|l| !st.tried.contains(l)).cloned().collect()
+            } else {
+                Vec::new()
+            };
+            // A root whose offered subgoals have all been taken is complete: its decomposition was
+            // the goal lines, and each was done or given up below it.
+            if offered && subgoal_menu.is_empty() {
+                return Ok(End::Complete);
+            }
+            // Below an offered line the node proposes actions: the line already is the subgoal, and
+            // names its objects (tiny models' own subgoals there were found to drift off them).
+            let under_offered = !is_root
+                && self.tree.node(node).parent == Some(self.tree.root())
+                && self.req.subgoals.contains(&self.tree.node(node).text);
+            let allow_subgoal = self.mode != ContextMode::NoSubgoalTree
+                && depth + 1 < budgets.max_depth
+                // (a root with lines left takes the next one: a taken line is never offered again)
+                && (!st.concrete_only || offered)
+                && !under_offered
+                && (!offered || !subgoal_menu.is_empty());
             // `done` before any step would end a goal with nothing done; it is offered once a child
-            // has been accepted (or when nothing else can be written).
-            let allow_done = st.accepted > 0 || (!allow_subgoal && actions.is_empty());
-            let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done };
+            // has been accepted, once every offered subgoal was taken, or when nothing else can be
+            // written.
+            let allow_done =
+                st.accepted > 0 || (offered && subgoal_menu.is_empty()) || (!allow_subgoal && actions.is_empty());
+            // While offered lines remain, the root decomposes into them (actions come below them):
+            // given the choice, both models wrote actions at the root and never took a line.
+            let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
+            let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done, subgoal_menu };
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
-            let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
-                st.replans += 1;
-                self.stats.replans += 1;
-                st.rejected = Some("(no answer within the token limit)".into());
-                continue;
+            let text = if self.rng.is_some() {
+                match self.draw(node, &dg, &st) {
+                    Some(t) => t,
+                    None => return Ok(End::Abandoned("random_steps")),
+                }
+            } else {
+                let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
+                    st.replans += 1;
+                    self.stats.replans += 1;
+                    st.rejected = Some("(no answer within the token limit)".into());
+                    continue;
+                };
+                text
             };
             let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e.to_string()))?;
             let proposal = match proposal {
@@ -388,6 +472,9 @@ impl Run<'_> {
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
             st.children += 1;
             self.node_event(child);
+            if child_action.is_none() && self.req.subgoals.contains(&child_text) {
+                st.tried.push(child_text.clone());
+            }
             if child_action.is_none() && echoes(&child_text, &self.tree.node(node).text) {
                 self.set_status(child, Status::Replanned, "congruence: it repeats its parent's goal");
                 st.replans += 1;
@@ -408,6 +495,12 @@ impl Run<'_> {
                 continue;
             }
 
+            // An offered subgoal (one of the task's goal lines) is congruent by construction, and
+            // whether one action does it is found by decomposing it (its first action, then `done`):
+            // it is decomposed without a verdict, as the random chooser does. A tiny model's verdicts
+            // on such lines were found to be replans with made-up reasons.
+            let offered_child = child_action.is_none() && is_root && self.req.subgoals.contains(&child_text);
+
             // The verdict on the new child. A proposed action can only be executed or rejected, so
             // its grammar names that one action (the verdict is mostly forced tokens, still the
             // model's choice).
@@ -425,7 +518,7 @@ impl Run<'_> {
                     }
                 }
                 None => VerdictGrammar {
-                    actions: self.action_set()?,
+                    actions: self.action_set(child)?,
                     reason_chars: self.cfg.reason_chars,
                     allow_decompose: depth + 1 < budgets.max_depth,
                     causes: Cause::ALL.to_vec(),
@@ -433,7 +526,13 @@ impl Run<'_> {
             };
             let lark = vg.to_lark().map_err(|e| StopCause::Error(format!("verdict grammar: {e}")))?;
             let prompt = self.prompter.terminate(&view, &text);
-            let Some(vtext) = self.call("terminate", child, &prompt, &lark)? else {
+            // The random chooser decomposes every subgoal it draws (its actions went to the world above).
+            let vtext = if self.rng.is_some() || offered_child {
+                Some("decompose".to_string())
+            } else {
+                self.call("terminate", child, &prompt, &lark)?
+            };
+            let Some(vtext) = vtext else {
                 self.set_status(child, Status::Replanned, "no verdict within the token limit");
                 st.replans += 1;
                 self.stats.replans += 1;
@@ -539,6 +638,50 @@ impl Run<'_> {
         }
         Ok(r)
     }
+}
+
+impl Run<'_> {
+    /// The `random` planner's decomposition, in place of the model's: at the root, an offered subgoal
+    /// line not yet taken, drawn uniformly (then `done`, or `random_actions` actions when nothing was
+    /// offered); below it, a uniform draw among the admitted actions until the node has executed
+    /// `random_steps` of them (or none is left), then `done`. Its only stopping rule is that fixed
+    /// length: nothing in it looks at the goals' state.
+    /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
+    fn draw(&mut self, node: NodeId, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
+        let rng = self.rng.as_mut().expect("draw is called for the random planner only");
+        let per_node = if node == self.tree.root() && self.req.subgoals.is_empty() {
+            self.cfg.random_actions
+        } else {
+            self.cfg.random_steps
+        };
+        if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
+            return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
+        }
+        let drawn = if st.done_here.len() < per_node { super::baseline::draw(&dg.actions, rng) } else { None };
+        match drawn {
+            Some(a) => Some(format!("action: {a}")),
+            None => dg.allow_done.then(|| "done".to_string()),
+        }
+    }
+}
+
+/// The objects of `focus` that `text` names: by class name (a whole word, case-insensitive) or by id
+/// written as `(id)`. The robot itself ("character is SITTING") is not an object its actions name.
+pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
+    let words: Vec<String> = text
+        .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .filter(|w| !w.is_empty())
+        .map(str::to_lowercase)
+        .collect();
+    focus
+        .iter()
+        .copied()
+        .filter(|&id| id != w.character())
+        .filter(|&id| {
+            text.contains(&format!("({id})"))
+                || w.node(id).is_some_and(|n| words.iter().any(|x| *x == n.class_name.to_lowercase()))
+        })
+        .collect()
 }
 
 /// Whether a proposed subgoal only repeats its parent's goal (the same words, or the start of them):

@@ -558,3 +558,119 @@ fn fresh_steps_drop_repeats_only_while_something_else_is_left() {
     // Nothing left: everything stays on offer (the rule never leaves a node without a step).
     assert_eq!(planner::fresh_steps(vec![walk_f.clone()], &[walk_a.clone()], &[walk_f.clone()]), [walk_f]);
 }
+
+const APPLE_IN_FRIDGE: &str = "apple is INSIDE to fridge";
+
+fn offered(lines: &[&str]) -> PlanRequest {
+    PlanRequest {
+        subgoals: lines.iter().map(|s| s.to_string()).collect(),
+        ..PlanRequest::new("put the apple in the fridge", vec![])
+    }
+}
+
+#[test]
+fn offered_subgoals_are_chosen_decomposed_without_a_verdict_and_end_the_root() {
+    let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {WALK_APPLE}"), "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &PlannerConfig::default(), &mut TraceWriter::sink());
+    // Three calls: the root's choice, the goal node's action, its `done`; no verdict, and no call
+    // for the root once its only offered line was taken.
+    assert_eq!(m.prompts.len(), 3, "{:?}", m.prompts);
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(plan_lines(&out), [WALK_APPLE]);
+    // The root's subgoal is one of the offered lines, not free text.
+    assert!(m.grammars[0].contains(&format!("\"{APPLE_IN_FRIDGE}\"")), "{}", m.grammars[0]);
+    assert!(!m.grammars[0].contains("/["), "no free-text subgoal at the root: {}", m.grammars[0]);
+    // Below it, actions name what the line names (apple, fridge) and what holds them (the counter).
+    let g = &m.grammars[1];
+    assert!(admits(g, "WALK", "<apple> (12)") && admits(g, "WALK", "<fridge> (10)"), "{g}");
+    assert!(admits(g, "WALK", "<kitchencounter> (11)"), "the apple is on the counter: {g}");
+    assert!(!admits(g, "WALK", "<plate> (17)") && !admits(g, "WALK", "<sofa> (30)"), "{g}");
+    assert!(!g.contains("subgoal"), "below an offered line the node proposes actions: {g}");
+    assert_eq!(out.tree.node(1).status, Status::Executed);
+}
+
+#[test]
+fn without_subgoal_focus_a_goal_node_may_name_any_object() {
+    let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {WALK_APPLE}"), "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let cfg = PlannerConfig { subgoal_focus: false, ..PlannerConfig::default() };
+    plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &cfg, &mut TraceWriter::sink());
+    assert!(admits(&m.grammars[1], "WALK", "<sofa> (30)"), "{}", m.grammars[1]);
+}
+
+#[test]
+fn an_offered_line_is_taken_once_and_the_root_moves_to_the_next() {
+    let tv = "television is ON";
+    let answers = [
+        format!("subgoal: {tv}"),
+        "action: [WALK] <television> (31)".to_string(),
+        "action: [SWITCHON] <television> (31)".to_string(),
+        "done".to_string(),
+        format!("subgoal: {APPLE_IN_FRIDGE}"),
+        format!("action: {WALK_APPLE}"),
+        "done".to_string(),
+    ];
+    let mut m = Scripted::new(&answers.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE, tv]), &PlannerConfig::default(), &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{}", m.grammars.last().unwrap());
+    assert!(!m.grammars[4].contains(&format!("\"{tv}\"")), "a taken line is not offered again: {}", m.grammars[4]);
+    // The television's node never offered the apple, and the apple's never the television.
+    assert!(!admits(&m.grammars[1], "WALK", "<apple> (12)"), "{}", m.grammars[1]);
+    assert!(!admits(&m.grammars[5], "WALK", "<television> (31)"), "{}", m.grammars[5]);
+    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)", WALK_APPLE]);
+}
+
+#[test]
+fn the_random_chooser_walks_the_offered_lines_with_a_fixed_number_of_steps_each() {
+    let cfg = |seed| PlannerConfig { kind: PlannerKind::Random, random_seed: seed, random_steps: 3, ..PlannerConfig::default() };
+    let lines = [APPLE_IN_FRIDGE, "television is ON"];
+    let go = |seed| {
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let mut none = Scripted::new(&[]);
+        plan(&mut none, &mut env, &offered(&lines), &cfg(seed), &mut TraceWriter::sink())
+    };
+    let (a, b) = (go(1), go(1));
+    assert_eq!(a.executed, b.executed, "deterministic per seed");
+    assert_eq!(a.stop, StopCause::Done);
+    assert_eq!(a.stats.llm_calls, 0);
+    let root = a.tree.node(a.tree.root());
+    let taken: Vec<&str> = root.children.iter().map(|&c| a.tree.node(c).text.as_str()).collect();
+    assert_eq!(taken.len(), 2, "each line once: {taken:?}");
+    for &c in &root.children {
+        let n = a.tree.node(c);
+        assert!(n.children.len() <= 3, "at most random_steps actions under {}", n.text);
+    }
+    assert!(a.executed.len() <= 6 && !a.executed.is_empty(), "{:?}", a.executed);
+}
+
+#[test]
+fn named_objects_match_class_names_as_words_and_ids() {
+    let w = World::demo();
+    let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+    let mut got = planner::named_objects(&w, &all, "apple is INSIDE to fridge");
+    got.sort();
+    assert_eq!(got, [10, 12]);
+    // "light" names both lights; "lightswitch" is another word.
+    let mut lights = planner::named_objects(&w, &all, "light is OFF");
+    lights.sort();
+    assert_eq!(lights, [23, 35]);
+    assert_eq!(planner::named_objects(&w, &all, "take <plate> (17)"), [17]);
+    assert!(planner::named_objects(&w, &all, "character is SITTING").is_empty());
+}
+
+#[test]
+fn the_root_narrows_a_scene_wide_focus_to_what_the_instruction_names_and_keeps_a_given_one() {
+    // Over the whole scene: the apple, the fridge and the counter the apple lies on.
+    let (_, m) = run(&["done"], &PlannerConfig::default());
+    let g = &m.grammars[0];
+    assert!(admits(g, "WALK", "<apple> (12)") && admits(g, "WALK", "<fridge> (10)"), "{g}");
+    assert!(!admits(g, "WALK", "<sofa> (30)"), "{g}");
+    // A focus the request gives (a task's relevant objects) is kept at the root.
+    let mut m = Scripted::new(&["done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest::new("put the apple in the fridge", vec![10, 12, 30]);
+    plan(&mut m, &mut env, &req, &PlannerConfig::default(), &mut TraceWriter::sink());
+    assert!(admits(&m.grammars[0], "WALK", "<sofa> (30)"), "{}", m.grammars[0]);
+}

@@ -358,3 +358,20 @@ fn measure_smollm2_mask_times() {
 fn qwen_vocab_walks_parse() {
     real_vocab_walks(crate::llm::gguf::test_models::QWEN, 8);
 }
+
+/// The feasible set never names one object twice, though the executor would run such an action.
+#[test]
+fn the_feasible_set_leaves_out_an_object_put_on_itself() {
+    use crate::action::{Action, Verb};
+    use crate::grammar::{ActionSet, Strength};
+    let mut w = crate::world::World::demo();
+    let apple = ObjRef::new("apple", 12);
+    w.execute(&Action::new(Verb::Walk, vec![apple.clone()]).unwrap()).unwrap();
+    w.execute(&Action::new(Verb::Grab, vec![apple.clone()]).unwrap()).unwrap();
+    let onto_itself = Action::new(Verb::PutBack, vec![apple.clone(), apple.clone()]).unwrap();
+    assert!(w.why_not(&onto_itself).is_none(), "the premise: the executor would run it");
+    let ids: Vec<u32> = w.nodes().map(|n| n.id).collect();
+    let ActionSet::Exact(list) = super::action_set(Strength::Feasible, &w, &ids) else { panic!("exact set expected") };
+    assert!(!list.contains(&onto_itself));
+    assert!(list.iter().any(|a| a.verb == Verb::PutBack), "other destinations stay: {list:?}");
+}
