@@ -29,6 +29,8 @@ fn cfg(kind: PlannerKind, strength: Strength, seed: u64, n: usize) -> PlanEvalCo
             random_seed: seed,
             random_actions: n,
             budgets: Budgets { max_actions: 60, ..Budgets::default() },
+            // The flat random walk of N actions; `random_walks_the_goal_lines` tests the tree one.
+            goal_subgoals: false,
             ..PlannerConfig::default()
         },
         seen: Seen::Goals,
@@ -280,4 +282,20 @@ fn on_eai_tasks_the_cli_leaves_out_the_actions_eai_cannot_score() {
     let (v, exported) = run(&["--all-verbs"]);
     assert_eq!(v["excluded_verbs"], serde_json::json!([]));
     assert!(unscoreable.iter().any(|verb| exported.contains(&format!("\"{verb}\""))), "{exported}");
+}
+
+#[test]
+fn random_walks_the_goal_lines() {
+    let tasks = demo_tasks();
+    let mut c = cfg(PlannerKind::Random, Strength::Feasible, 1, 20);
+    c.planner.goal_subgoals = true;
+    c.planner.random_steps = 3;
+    for t in &tasks {
+        let lines = step::eval::protocol::subgoals(t, Seen::Goals);
+        let a = plans::run_task(&mut NoModel, t, &c);
+        let b = plans::run_task(&mut NoModel, t, &c);
+        assert_eq!(a.plan, b.plan, "{}: deterministic per seed", t.id);
+        assert!(a.actions_sent <= 3 * lines.len(), "{}: at most random_steps per line: {}", t.id, a.actions_sent);
+        assert!(a.actions_sent > 0 && a.replay_agrees && a.grammar_errors == 0 && a.llm_calls == 0, "{a:?}");
+    }
 }

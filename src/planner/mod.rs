@@ -199,7 +199,7 @@ impl Default for PlannerConfig {
             gen: GenOptions { max_tokens: 48, ..GenOptions::default() },
             random_seed: 0,
             random_actions: 30,
-            random_steps: 6,
+            random_steps: 10,
             subgoal_focus: true,
             goal_subgoals: true,
             oracle_stop: false,
