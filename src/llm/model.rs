@@ -353,8 +353,9 @@ impl Layer {
             let job = HeadBlock { q, keys, values, head, kvh: head / group, nh, kvw, hd, pos, scale, out: &out };
             let rows = qb * qblock..((qb + 1) * qblock).min(t);
             match kernel {
-                // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
-                Kernel::Avx2 => unsafe { job.run_avx2(rows, sc) },
+                // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has AVX2
+                // and FMA.
+                Kernel::Avx2 | Kernel::Avx512 => unsafe { job.run_avx2(rows, sc) },
                 // SAFETY: the portable loops need no CPU feature.
                 Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
             }
