@@ -33,6 +33,8 @@ impl Default for LlmBenchConfig {
 pub struct LlmBenchReport {
     pub model: String,
     pub threads: usize,
+    /// The dot-product kernel this CPU runs (`avx512`, `avx2` or `scalar`; see `STEP_KERNEL`).
+    pub kernel: &'static str,
     pub runs: usize,
     pub load_ms: f64,
     pub prompt_tokens: usize,
@@ -118,6 +120,7 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     Ok(LlmBenchReport {
         model: engine.path().display().to_string(),
         threads: crate::llm::kernels::pool::global().threads(),
+        kernel: crate::llm::kernels::kernel().name(),
         runs,
         load_ms: engine.load_ms(),
         prompt_tokens,

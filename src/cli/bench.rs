@@ -186,7 +186,7 @@ fn spawn_neighbours() -> anyhow::Result<Vec<Child>> {
 
 fn table(r: &LlmBenchReport) -> String {
     format!(
-        "model {} ({} threads, median of {})\n\
+        "model {} ({} threads, {} kernels, median of {})\n\
          load                 {:>9.1} ms\n\
          prefill ({:>3} tok)    {:>9.1} tok/s\n\
          decode               {:>9.1} tok/s\n\
@@ -196,6 +196,7 @@ fn table(r: &LlmBenchReport) -> String {
          peak RSS             {:>9.1} MB",
         r.model,
         r.threads,
+        r.kernel,
         r.runs,
         r.load_ms,
         r.prompt_tokens,

@@ -332,13 +332,21 @@ impl Layer {
         self.cache.v[pos * kvw..(pos + t) * kvw].copy_from_slice(v);
         self.cache.len = pos + t;
 
-        // One task per (head, block of queries); each query head reads its kv head in place.
+        // One task per (kv head, sub-group of its query heads, block of queries): the query heads
+        // that share a kv head read each block of its keys and values together, while it is in L1,
+        // instead of each head streaming the whole cache. Sub-groups only when there would
+        // otherwise be too few tasks to share out (decoding); every (query, head) result is
+        // computed the same way whatever the grouping.
         let kv_len = pos + t;
         let group = nh / nkv;
         let qblock = 16;
         let qblocks = t.div_ceil(qblock);
-        let n_tasks = nh * qblocks;
-        let scores = SendPtr(fit(&mut s.scores, n_tasks * kv_len).as_mut_ptr());
+        let threads = pool::global().threads();
+        let subs = (2 * threads).div_ceil(nkv * qblocks).clamp(1, group);
+        let per_sub = group.div_ceil(subs);
+        let subs = group.div_ceil(per_sub);
+        let n_tasks = nkv * subs * qblocks;
+        let scores = SendPtr(fit(&mut s.scores, n_tasks * per_sub * kv_len).as_mut_ptr());
         let att = fit(&mut s.att, t * nh * hd);
         att.fill(0.0);
         let out = SendPtr(att.as_mut_ptr());
@@ -346,15 +354,18 @@ impl Layer {
         let scale = 1.0 / (hd as f32).sqrt();
         let kernel = kernel();
         let task = |task: usize| {
-            let (head, qb) = (task % nh, task / nh);
-            // SAFETY: each task owns its row of `scores` and the (query, head) slices of `att` it
+            let (kvh, sub, qb) = (task % nkv, task / nkv % subs, task / (nkv * subs));
+            let first = kvh * group + sub * per_sub;
+            let heads = first..(first + per_sub).min((kvh + 1) * group);
+            // SAFETY: each task owns its rows of `scores` and the (query, head) slices of `att` it
             // writes; both buffers outlive the pool job.
-            let sc = unsafe { std::slice::from_raw_parts_mut(scores.get().add(task * kv_len), kv_len) };
-            let job = HeadBlock { q, keys, values, head, kvh: head / group, nh, kvw, hd, pos, scale, out: &out };
+            let sc = unsafe { std::slice::from_raw_parts_mut(scores.get().add(task * per_sub * kv_len), per_sub * kv_len) };
+            let job = HeadBlock { q, keys, values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
             let rows = qb * qblock..((qb + 1) * qblock).min(t);
             match kernel {
-                // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
-                Kernel::Avx2 => unsafe { job.run_avx2(rows, sc) },
+                // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has AVX2
+                // and FMA.
+                Kernel::Avx2 | Kernel::Avx512 => unsafe { job.run_avx2(rows, sc) },
                 // SAFETY: the portable loops need no CPU feature.
                 Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
             }
@@ -365,21 +376,28 @@ impl Layer {
     }
 }
 
-/// One attention head over a block of query rows: scores against every cached key up to each
-/// query's own position (causal), softmax, weighted sum of the values, written into `out`.
+/// Query heads sharing one kv head over a block of query rows: scores against every cached key up
+/// to each query's own position (causal), softmax, weighted sum of the values, written into `out`.
 struct HeadBlock<'a> {
     q: &'a [f32],
     keys: &'a [f32],
     values: &'a [f32],
-    head: usize,
+    /// The query heads, all of kv head `kvh`.
+    heads: std::ops::Range<usize>,
     kvh: usize,
     nh: usize,
     kvw: usize,
     hd: usize,
     pos: usize,
+    /// The row length of each head's scores in the task's buffer.
+    kv_len: usize,
     scale: f32,
     out: &'a SendPtr,
 }
+
+/// Keys (and values) per block that the heads of a group go over together: 64 rows of a 64-wide
+/// head are 16 KB, so a block stays in L1 while every head of the group reads it.
+const KEY_BLOCK: usize = 64;
 
 impl HeadBlock<'_> {
     /// The same code over the AVX2 loops, compiled with those features; both loop sets compute the
@@ -396,28 +414,57 @@ impl HeadBlock<'_> {
     }
 
     /// # Safety
-    /// `O`'s CPU features must be present.
+    /// `O`'s CPU features must be present; `sc` holds `heads.len()` rows of `kv_len`.
     #[inline(always)]
     unsafe fn run<O: AttnOps>(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
-        let (hd, kvw, kvh) = (self.hd, self.kvw, self.kvh);
+        let (hd, kvw, nh, kv_len) = (self.hd, self.kvw, self.nh, self.kv_len);
+        let kv = self.kvh * hd;
         for i in rows {
-            let qi = &self.q[(i * self.nh + self.head) * hd..][..hd];
             let seen = self.pos + i + 1; // causal: keys 0..=pos+i
-            let mut max = f32::NEG_INFINITY;
-            for (j, sj) in sc[..seen].iter_mut().enumerate() {
-                *sj = O::dot(qi, &self.keys[j * kvw + kvh * hd..][..hd]) * self.scale;
-                max = max.max(*sj);
+            // Scores, a block of keys at a time for all the group's heads.
+            for j0 in (0..seen).step_by(KEY_BLOCK) {
+                let j1 = (j0 + KEY_BLOCK).min(seen);
+                for (g, head) in self.heads.clone().enumerate() {
+                    let qi = &self.q[(i * nh + head) * hd..][..hd];
+                    let key = |j: usize| &self.keys[j * kvw + kv..][..hd];
+                    let sc = &mut sc[g * kv_len..];
+                    let mut j = j0;
+                    // Four keys at a time: four independent multiply-add chains.
+                    while j + 4 <= j1 {
+                        let d = O::dot4(qi, [key(j), key(j + 1), key(j + 2), key(j + 3)]);
+                        for (k, d) in d.into_iter().enumerate() {
+                            sc[j + k] = d * self.scale;
+                        }
+                        j += 4;
+                    }
+                    for j in j..j1 {
+                        sc[j] = O::dot(qi, key(j)) * self.scale;
+                    }
+                }
             }
-            let mut sum = 0f32;
-            for sj in &mut sc[..seen] {
-                *sj = (*sj - max).exp();
-                sum += *sj;
+            // Softmax of each head's scores.
+            for g in 0..self.heads.len() {
+                let sc = &mut sc[g * kv_len..g * kv_len + seen];
+                let max = sc.iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
+                let mut sum = 0f32;
+                for sj in sc.iter_mut() {
+                    *sj = (*sj - max).exp();
+                    sum += *sj;
+                }
+                let inv = 1.0 / sum;
+                sc.iter_mut().for_each(|p| *p *= inv);
             }
-            // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
-            let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * self.nh + self.head) * hd), hd) };
-            let inv = 1.0 / sum;
-            sc[..seen].iter_mut().for_each(|p| *p *= inv);
-            O::weighted_sum(y, &sc[..seen], &self.values[kvh * hd..], kvw);
+            // The weighted sums, a block of values at a time for all the heads: each output
+            // element still takes its keys in order (the sum goes through `y` between blocks,
+            // exactly).
+            for j0 in (0..seen).step_by(KEY_BLOCK) {
+                let j1 = (j0 + KEY_BLOCK).min(seen);
+                for (g, head) in self.heads.clone().enumerate() {
+                    // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
+                    let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * nh + head) * hd), hd) };
+                    O::weighted_sum(y, &sc[g * kv_len + j0..g * kv_len + j1], &self.values[j0 * kvw + kv..], kvw);
+                }
+            }
         }
     }
 }
@@ -496,4 +543,85 @@ pub fn argmax(logits: &[f32]) -> Option<u32> {
         }
     }
     best.map(|(i, _)| i as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The attention of one query head as it was computed before heads were grouped: all keys'
+    /// scores, softmax, one weighted sum over all values.
+    fn one_head<O: AttnOps>(q: &[f32], keys: &[f32], values: &[f32], kvw: usize, kv: usize, scale: f32, y: &mut [f32]) {
+        let hd = y.len();
+        let seen = keys.len() / kvw;
+        // SAFETY: callers pass `O` only where its CPU features are present.
+        unsafe {
+            let mut sc: Vec<f32> = (0..seen).map(|j| O::dot(q, &keys[j * kvw + kv..][..hd]) * scale).collect();
+            let mut max = f32::NEG_INFINITY;
+            sc.iter().for_each(|&s| max = max.max(s));
+            let mut sum = 0f32;
+            for s in &mut sc {
+                *s = (*s - max).exp();
+                sum += *s;
+            }
+            let inv = 1.0 / sum;
+            sc.iter_mut().for_each(|p| *p *= inv);
+            O::weighted_sum(y, &sc, &values[kv..], kvw);
+        }
+    }
+
+    /// Grouped heads over blocks of keys give exactly the per-head results, for groups of one,
+    /// part of and all of a kv head's query heads, over several key blocks and a partial one.
+    #[test]
+    fn grouped_attention_equals_one_head_at_a_time_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        let (nh, nkv, hd, pos, t) = (6, 2, 64, 150, 3);
+        let (kvw, kv_len, group) = (nkv * hd, pos + t, nh / nkv);
+        let mut r = |n: usize| (0..n).map(|_| rng.random_range(-2.0f32..2.0)).collect::<Vec<_>>();
+        let (q, keys, values) = (r(t * nh * hd), r(kv_len * kvw), r(kv_len * kvw));
+        let scale = 0.125;
+        let avx2 = super::super::kernels::avx2::available();
+        for simd in [false, true] {
+            if simd && !avx2 {
+                eprintln!("skipped the AVX2 half: this CPU has no AVX2/FMA");
+                continue;
+            }
+            let mut want = vec![0f32; t * nh * hd];
+            for i in 0..t {
+                let seen = pos + i + 1;
+                for h in 0..nh {
+                    let (qi, y) = (&q[(i * nh + h) * hd..][..hd], &mut want[(i * nh + h) * hd..][..hd]);
+                    let (k, v, kv) = (&keys[..seen * kvw], &values[..seen * kvw], h / group * hd);
+                    #[cfg(target_arch = "x86_64")]
+                    if simd {
+                        one_head::<super::super::kernels::attn::Avx2>(qi, k, v, kvw, kv, scale, y);
+                        continue;
+                    }
+                    one_head::<Portable>(qi, k, v, kvw, kv, scale, y);
+                }
+            }
+            for per_sub in [1, 2, 3] {
+                let mut got = vec![0f32; t * nh * hd];
+                let out = SendPtr(got.as_mut_ptr());
+                for kvh in 0..nkv {
+                    for first in (kvh * group..(kvh + 1) * group).step_by(per_sub) {
+                        let heads = first..(first + per_sub).min((kvh + 1) * group);
+                        let mut sc = vec![0f32; per_sub * kv_len];
+                        let job = HeadBlock { q: &q, keys: &keys, values: &values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
+                        // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
+                        unsafe {
+                            if simd {
+                                job.run_avx2(0..t, &mut sc)
+                            } else {
+                                job.run::<Portable>(0..t, &mut sc)
+                            }
+                        };
+                    }
+                }
+                let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "simd {simd}, {per_sub} heads per task");
+            }
+        }
+    }
 }

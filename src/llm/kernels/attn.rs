@@ -15,6 +15,13 @@ pub trait AttnOps {
     /// The implementation's CPU features must be present.
     unsafe fn dot(a: &[f32], b: &[f32]) -> f32;
 
+    /// Four [`AttnOps::dot`]s of `a` with `b[0..4]`, each the same bits as alone. One dot is a
+    /// single chain of dependent multiply-adds (latency-bound); four independent ones overlap.
+    ///
+    /// # Safety
+    /// As [`AttnOps::dot`].
+    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4];
+
     /// For every element `e` of `y`: `y[e] = fma(p[j], values[j * stride + e], y[e])` for each `j`
     /// in order.
     ///
@@ -42,6 +49,11 @@ impl AttnOps for Portable {
             s = x.mul_add(*y, s);
         }
         s
+    }
+
+    #[inline(always)]
+    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
+        b.map(|b| Self::dot(a, b))
     }
 
     #[inline(always)]
@@ -80,6 +92,33 @@ impl AttnOps for Avx2 {
             c += 1;
         }
         s
+    }
+
+    #[inline(always)]
+    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
+        use std::arch::x86_64::*;
+        let n = b.iter().fold(a.len(), |n, b| n.min(b.len()));
+        let mut acc = [_mm256_setzero_ps(); 4];
+        let mut c = 0;
+        while c + 8 <= n {
+            let x = _mm256_loadu_ps(a.as_ptr().add(c));
+            for k in 0..4 {
+                acc[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(b[k].as_ptr().add(c)), acc[k]);
+            }
+            c += 8;
+        }
+        let mut out = [0f32; 4];
+        for k in 0..4 {
+            // As `dot`: the lanes reduced as `reduce_lanes`, then the tail fused in order.
+            let s = _mm_add_ps(_mm256_castps256_ps128(acc[k]), _mm256_extractf128_ps::<1>(acc[k]));
+            let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+            let mut s = _mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<1>(s, s)));
+            for e in c..n {
+                s = a.get_unchecked(e).mul_add(*b[k].get_unchecked(e), s);
+            }
+            out[k] = s;
+        }
+        out
     }
 
     #[inline(always)]

@@ -2,8 +2,9 @@
 //! the activations are quantised once per matrix input to 8-bit blocks of 32 ([`Q8Acts`]), and each
 //! output element is an integer dot product per block scaled in f32.
 //!
-//! Two implementations compute exactly the same numbers: a portable scalar one ([`scalar`]) and an
-//! AVX2/FMA one ([`avx2`]) chosen at run time. They agree bit for bit because the integer part is exact
+//! Three implementations compute exactly the same numbers: a portable scalar one ([`scalar`]), an
+//! AVX2/FMA one ([`avx2`]) and an AVX-512 VNNI one ([`avx512`]), the fastest the CPU has chosen at run
+//! time. They agree bit for bit because the integer part is exact
 //! and the float part follows the same order: eight lanes (lane `l` holds elements `4l..4l+4` of each
 //! 32-block), one fused multiply-add per lane and block, a fixed reduction tree, then the blocks'
 //! min terms summed in order. Rows are split across the [`pool`]'s threads; each output element is
@@ -11,6 +12,7 @@
 
 pub mod attn;
 pub mod avx2;
+pub mod avx512;
 pub mod pool;
 pub mod scalar;
 
@@ -32,18 +34,45 @@ pub struct Q8Block {
     pub qs: [i8; QK],
 }
 
+/// Block `c` of two consecutive tokens for the AVX-512 kernels ([`avx512::dot_pairs`]): each token's
+/// 32 values offset to unsigned (`q + 128`), one token per half, and each token's scale repeated over
+/// its half's eight lanes, so that one 512-bit load feeds each operand.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct PairBlock {
+    pub qs: [u8; 64],
+    pub d: [f32; 16],
+}
+
+impl Default for PairBlock {
+    fn default() -> Self {
+        Self { qs: [0; 64], d: [0.0; 16] }
+    }
+}
+
 /// `t` rows of activations, each quantised to `cols / 32` blocks.
 #[derive(Clone, Debug, Default)]
 pub struct Q8Acts {
     pub blocks: Vec<Q8Block>,
+    /// Tokens `2p`, `2p + 1` as [`PairBlock`]s (`pairs[p * nb + c]`), for `t / 2` pairs; empty
+    /// unless quantised for the AVX-512 kernel with at least four tokens.
+    pub pairs: Vec<PairBlock>,
+    /// Beside the pairs: every token's `s` by block, `sums[c * t + k]`, so that the minimum terms
+    /// of many tokens are one vector operation.
+    pub sums: Vec<f32>,
     pub t: usize,
     pub nb: usize,
 }
 
 impl Q8Acts {
     /// Quantises `x` (`t` rows of `cols`, cols a multiple of 32) in place of the previous content,
-    /// reusing the allocation.
+    /// reusing the allocation, in the layouts the process's kernel reads.
     pub fn quantize(&mut self, x: &[f32], t: usize, cols: usize) {
+        self.quantize_for(x, t, cols, kernel())
+    }
+
+    /// As [`Q8Acts::quantize`], for `kernel`'s layouts.
+    pub fn quantize_for(&mut self, x: &[f32], t: usize, cols: usize, kernel: Kernel) {
         debug_assert_eq!(x.len(), t * cols);
         self.t = t;
         // No quantised kernel takes a width that is not whole blocks (those matrices are kept as f32).
@@ -66,6 +95,41 @@ impl Q8Acts {
                 *b = quantize_block(xs);
             }
         }
+        self.pairs.clear();
+        self.sums.clear();
+        // Decoding (fewer than four tokens) reads the blocks alone.
+        if kernel == Kernel::Avx512 && t >= 4 && self.nb > 0 {
+            let nb = self.nb;
+            let n = t / 2 * nb;
+            self.pairs.resize(n, PairBlock::default());
+            let (blocks, out) = (&self.blocks, PairPtr(self.pairs.as_mut_ptr()));
+            pool::global().run(n.div_ceil(CHUNK), &|k| {
+                for i in k * CHUNK..((k + 1) * CHUNK).min(n) {
+                    let (p, c) = (i / nb, i % nb);
+                    let (b0, b1) = (&blocks[2 * p * nb + c], &blocks[(2 * p + 1) * nb + c]);
+                    let mut pb = PairBlock { qs: [0; 64], d: [b0.d; 16] };
+                    pb.d[8..].fill(b1.d);
+                    for e in 0..QK {
+                        // q + 128 as a byte: the sign bit flipped.
+                        pb.qs[e] = b0.qs[e] as u8 ^ 0x80;
+                        pb.qs[QK + e] = b1.qs[e] as u8 ^ 0x80;
+                    }
+                    // SAFETY: i < n = pairs.len(), and each task writes its own range.
+                    unsafe { *out.get().add(i) = pb };
+                }
+            });
+            self.sums.resize(nb * t, 0.0);
+            for (k, row) in self.blocks.chunks_exact(nb).enumerate() {
+                for (c, b) in row.iter().enumerate() {
+                    self.sums[c * t + k] = b.s;
+                }
+            }
+        }
+    }
+
+    /// The pair blocks of tokens `2p` and `2p + 1`.
+    pub fn pair(&self, p: usize) -> &[PairBlock] {
+        &self.pairs[p * self.nb..(p + 1) * self.nb]
     }
 
     pub fn row(&self, i: usize) -> &[Q8Block] {
@@ -81,6 +145,18 @@ unsafe impl Sync for BlockPtr {}
 
 impl BlockPtr {
     fn get(&self) -> *mut Q8Block {
+        self.0
+    }
+}
+
+#[derive(Clone, Copy)]
+struct PairPtr(*mut PairBlock);
+// SAFETY: used only to write disjoint pair blocks from pool tasks (see `Q8Acts::quantize_for`).
+unsafe impl Send for PairPtr {}
+unsafe impl Sync for PairPtr {}
+
+impl PairPtr {
+    fn get(&self) -> *mut PairBlock {
         self.0
     }
 }
@@ -256,6 +332,11 @@ impl QMatrix {
                     for r in first..rows.end {
                         let w = [row(r)];
                         let mut i = i0;
+                        // AVX-512: pairs of tokens, 16 then 8 then 2 at a time (i0 is even, so
+                        // token i starts pair i / 2).
+                        if kernel == Kernel::Avx512 && !q.pairs.is_empty() && avx512::handles(*fmt) {
+                            i = self.pairs_avx512(*fmt, w[0], q, i, end, r, y, ld);
+                        }
                         // Eight (then four) tokens at a time share each decoded weight block.
                         while i + 8 <= end {
                             let a = std::array::from_fn::<_, 8, _>(|k| q.row(i + k));
@@ -294,6 +375,40 @@ impl QMatrix {
     }
 }
 
+impl QMatrix {
+    /// Row `r` times tokens `i..` in pairs, as far as whole pairs before `end` go; returns the first
+    /// token not done.
+    ///
+    /// # Safety
+    /// As [`QMatrix::compute_rows`], and the AVX-512 kernel must be available; `q` has its pairs.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    unsafe fn pairs_avx512(&self, fmt: Format, w: &[u8], q: &Q8Acts, mut i: usize, end: usize, r: usize, y: *mut f32, ld: usize) -> usize {
+        debug_assert!(i % 2 == 0);
+        let store = |i: usize, out: &[[f32; 2]]| {
+            for (j, v) in out.iter().flatten().enumerate() {
+                *y.add((i + j) * ld + r) = *v;
+            }
+        };
+        let (s, t) = (&q.sums, q.t);
+        while i + 16 <= end {
+            let p = std::array::from_fn::<_, 8, _>(|j| q.pair(i / 2 + j));
+            store(i, &avx512::dot_pairs::<8>(fmt, w, &p, &s[i..], t));
+            i += 16;
+        }
+        while i + 8 <= end {
+            let p = std::array::from_fn::<_, 4, _>(|j| q.pair(i / 2 + j));
+            store(i, &avx512::dot_pairs::<4>(fmt, w, &p, &s[i..], t));
+            i += 8;
+        }
+        while i + 2 <= end {
+            store(i, &avx512::dot_pairs::<1>(fmt, w, &[q.pair(i / 2)], &s[i..], t));
+            i += 2;
+        }
+        i
+    }
+}
+
 /// Tokens whose activations one pass over a task's rows reuses (a multiple of 8): 32 rows of 4864
 /// columns of activation blocks are ~190 KB, well inside L2 beside the rows' weights.
 const TOKEN_GROUP: usize = 32;
@@ -303,18 +418,35 @@ const TOKEN_GROUP: usize = 32;
 pub enum Kernel {
     Scalar,
     Avx2,
+    /// AVX-512 VNNI where it has a kernel for the format, else AVX2.
+    Avx512,
 }
 
 impl Kernel {
-    /// The fastest implementation this CPU runs (`STEP_KERNEL=scalar` forces the portable one).
+    /// The fastest implementation this CPU runs. `STEP_KERNEL=scalar` forces the portable one and
+    /// `STEP_KERNEL=avx2` the AVX2 one (where the CPU has it), so every path can be run on one machine.
     pub fn detect() -> Kernel {
-        if std::env::var("STEP_KERNEL").is_ok_and(|v| v == "scalar") {
-            return Kernel::Scalar;
+        let forced = std::env::var("STEP_KERNEL").ok();
+        match forced.as_deref() {
+            Some("scalar") => return Kernel::Scalar,
+            Some("avx2") if avx2::available() => return Kernel::Avx2,
+            _ => {}
         }
-        if avx2::available() {
+        if avx512::available() {
+            Kernel::Avx512
+        } else if avx2::available() {
             Kernel::Avx2
         } else {
             Kernel::Scalar
+        }
+    }
+
+    /// The name `STEP_KERNEL` takes for this kernel.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kernel::Scalar => "scalar",
+            Kernel::Avx2 => "avx2",
+            Kernel::Avx512 => "avx512",
         }
     }
 }
@@ -330,6 +462,10 @@ fn dot<const NR: usize, const NT: usize>(
     match kernel {
         // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2, FMA and F16C.
         Kernel::Avx2 => unsafe { avx2::dot::<NR, NT>(fmt, w, a) },
+        // SAFETY: `Kernel::Avx512` is only chosen when the CPU has AVX-512 F/BW/VL/VNNI besides
+        // the AVX2 set.
+        Kernel::Avx512 if avx512::handles(fmt) => unsafe { avx512::dot::<NR, NT>(fmt, w, a) },
+        Kernel::Avx512 => unsafe { avx2::dot::<NR, NT>(fmt, w, a) },
         Kernel::Scalar => w.map(|w| scalar::dot::<NT>(fmt, w, a)),
     }
 }

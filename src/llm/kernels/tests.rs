@@ -161,6 +161,16 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
         // SAFETY: AVX2 and FMA are present (checked above).
         let (x, y) = unsafe { (Portable::dot(&a, &b), attn::Avx2::dot(&a, &b)) };
         assert_eq!(x.to_bits(), y.to_bits(), "dot, hd {hd}");
+        let keys: Vec<Vec<f32>> = (0..4).map(|_| randn(&mut rng, hd)).collect();
+        let four = [&keys[0][..], &keys[1][..], &keys[2][..], &keys[3][..]];
+        // SAFETY: as above.
+        let (x4, y4) = unsafe { (Portable::dot4(&a, four), attn::Avx2::dot4(&a, four)) };
+        for k in 0..4 {
+            // SAFETY: the portable loop needs no CPU feature.
+            let one = unsafe { Portable::dot(&a, four[k]) };
+            assert_eq!(one.to_bits(), x4[k].to_bits(), "portable dot4, hd {hd}");
+            assert_eq!(one.to_bits(), y4[k].to_bits(), "avx2 dot4, hd {hd}");
+        }
         for keys in [1, 7, 40] {
             let stride = hd + 24;
             let values = randn(&mut rng, keys * stride);
@@ -189,6 +199,66 @@ fn rounding_matches_round_half_away_from_zero() {
         let h = i as f32 * 0.5;
         for v in [h, f32::from_bits(h.to_bits() + 1), f32::from_bits(h.to_bits().saturating_sub(1))] {
             assert_eq!(round_away(v), v.round() as i32, "{v}");
+        }
+    }
+}
+
+/// A matrix of random raw blocks: every byte random except the f16 scales (kept finite and small,
+/// so that sums stay finite), so that extremes the quantiser never writes (Q8_0's -128, every Q5_0
+/// high-bit pattern, large 6-bit Q4_K scales) are exercised too.
+fn random_blocks(rng: &mut StdRng, fmt: Format, rows: usize, cols: usize) -> QMatrix {
+    let (bv, bb) = fmt.block();
+    let nblocks = rows * cols / bv;
+    let mut data: Vec<u8> = (0..nblocks * bb).map(|_| rng.random()).collect();
+    // Byte offsets of the f16 scales inside a block.
+    let scales: &[usize] = match fmt {
+        Format::Q4_1 | Format::Q4K => &[0, 2],
+        Format::Q5_0 | Format::Q8_0 => &[0],
+        Format::Q6K => &[208],
+    };
+    for b in data.chunks_exact_mut(bb) {
+        for &o in scales {
+            let v = half::f16::from_f32(rng.random_range(-0.05f32..0.05));
+            b[o..o + 2].copy_from_slice(&v.to_bits().to_le_bytes());
+        }
+    }
+    QMatrix { rows, cols, storage: Storage::Quant { fmt, data, row_bytes: cols / bv * bb } }
+}
+
+#[test]
+fn avx512_kernels_equal_the_scalar_ones_bit_for_bit() {
+    if !avx512::available() {
+        eprintln!("skipped: this CPU has no AVX-512 VNNI");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(19);
+    // t = 1 and 3: decoding (four rows at a time, then single rows: 13 rows); 45 and 64: whole
+    // 32-token groups, then 16-, 8- and 2-token pair groups and a single token.
+    for (_, fmt) in FORMATS {
+        for (cols, t) in [(256, 1), (768, 3), (768, 5), (1024, 9), (512, 45), (256, 64), (256, 27)] {
+            for raw in [false, true] {
+                let m = if raw {
+                    random_blocks(&mut rng, fmt, 13, cols)
+                } else {
+                    quantised(&mut rng, FORMATS.iter().find(|f| f.1 == fmt).unwrap().0, 13, cols).0
+                };
+                let mut x = randn(&mut rng, t * cols);
+                // A block at full scale both ways: activations of exactly ±127.
+                x[..QK].iter_mut().enumerate().for_each(|(e, v)| *v = if e % 3 == 0 { -4.0 } else { 4.0 });
+                let mut q = Q8Acts::default();
+                q.quantize_for(&x, t, cols, Kernel::Avx512);
+                assert_eq!(q.pairs.is_empty(), t < 4);
+                let want = run(&m, &q, &x, t, Kernel::Scalar);
+                // With the pair blocks (prompts), and without them (every token through the
+                // 256-bit kernel).
+                let with_pairs = run(&m, &q, &x, t, Kernel::Avx512);
+                q.pairs.clear();
+                let without = run(&m, &q, &x, t, Kernel::Avx512);
+                for (name, got) in [("pairs", with_pairs), ("rows", without)] {
+                    let same = want.iter().zip(&got).all(|(x, y)| x.to_bits() == y.to_bits());
+                    assert!(same, "{fmt:?} raw {raw} cols {cols} t {t} {name}: scalar {want:?}\n avx512 {got:?}");
+                }
+            }
         }
     }
 }
