@@ -59,7 +59,7 @@ pub unsafe fn dot<const NR: usize, const NT: usize>(
 }
 
 #[cfg(target_arch = "x86_64")]
-mod x86 {
+pub(super) mod x86 {
     //! The helpers are `inline(always)` so that they compile inside `dot`, with its target features.
     use std::arch::x86_64::*;
 
@@ -124,14 +124,14 @@ mod x86 {
 
     /// The two f16 values at `p` (unaligned) as f32, exactly (F16C), in one conversion.
     #[inline(always)]
-    unsafe fn f16_pair(p: *const u8) -> (f32, f32) {
+    pub(in crate::llm::kernels) unsafe fn f16_pair(p: *const u8) -> (f32, f32) {
         let v = _mm_cvtph_ps(_mm_cvtsi32_si128(std::ptr::read_unaligned(p as *const i32)));
         (_mm_cvtss_f32(v), _mm_cvtss_f32(_mm_movehdup_ps(v)))
     }
 
     /// The f16 value at `p` as f32, exactly.
     #[inline(always)]
-    unsafe fn f16(p: *const u8) -> f32 {
+    pub(in crate::llm::kernels) unsafe fn f16(p: *const u8) -> f32 {
         let v = _mm_cvtph_ps(_mm_cvtsi32_si128(std::ptr::read_unaligned(p as *const u16) as i32));
         _mm_cvtss_f32(v)
     }
@@ -143,7 +143,7 @@ mod x86 {
 
     /// 16 bytes of nibbles → 32 bytes: low nibbles (elements 0..16), then high nibbles (16..32).
     #[inline(always)]
-    unsafe fn nibbles(p: *const u8) -> __m256i {
+    pub(in crate::llm::kernels) unsafe fn nibbles(p: *const u8) -> __m256i {
         // The 16 bytes in both halves, the upper half shifted right by 4, then masked: three
         // instructions where splitting and re-joining halves takes five.
         let x = _mm256_broadcastsi128_si256(_mm_loadu_si128(p as *const __m128i));
@@ -155,7 +155,7 @@ mod x86 {
     /// so that is a few row groups ahead), so that the memory stream runs ahead of the arithmetic.
     /// A hint only: it never faults, even past the end of the matrix.
     #[inline(always)]
-    unsafe fn prefetch_next<const NR: usize>(w: &[u8], offset: usize) {
+    pub(in crate::llm::kernels) unsafe fn prefetch_next<const NR: usize>(w: &[u8], offset: usize) {
         if NR > 1 {
             let p = w.as_ptr().wrapping_add(offset + PREFETCH_AHEAD);
             _mm_prefetch::<_MM_HINT_T0>(p as *const i8);

@@ -137,38 +137,9 @@ mod x86 {
 
     use super::super::{q4k_scale_min, PairBlock, Q8Block};
 
-    /// The two f16 values at `p` (unaligned) as f32, exactly, in one conversion.
-    #[inline(always)]
-    pub unsafe fn f16_pair(p: *const u8) -> (f32, f32) {
-        let v = _mm_cvtph_ps(_mm_cvtsi32_si128(std::ptr::read_unaligned(p as *const i32)));
-        (_mm_cvtss_f32(v), _mm_cvtss_f32(_mm_movehdup_ps(v)))
-    }
-
-    /// The f16 value at `p` as f32, exactly.
-    #[inline(always)]
-    pub unsafe fn f16(p: *const u8) -> f32 {
-        let v = _mm_cvtph_ps(_mm_cvtsi32_si128(std::ptr::read_unaligned(p as *const u16) as i32));
-        _mm_cvtss_f32(v)
-    }
-
-    /// 16 bytes of nibbles → 32 bytes: low nibbles (elements 0..16), then high nibbles (16..32).
-    #[inline(always)]
-    pub unsafe fn nibbles(p: *const u8) -> __m256i {
-        let x = _mm256_broadcastsi128_si256(_mm_loadu_si128(p as *const __m128i));
-        let x = _mm256_srlv_epi64(x, _mm256_set_epi64x(4, 4, 0, 0));
-        _mm256_and_si256(x, _mm256_set1_epi8(0x0f))
-    }
-
-    /// As the AVX2 kernels: the weights a few row groups ahead when decoding.
-    #[inline(always)]
-    unsafe fn prefetch_next<const NR: usize>(w: &[u8], offset: usize) {
-        if NR > 1 {
-            let p = w.as_ptr().wrapping_add(offset + PREFETCH_AHEAD);
-            _mm_prefetch::<_MM_HINT_T0>(p as *const i8);
-        }
-    }
-
-    const PREFETCH_AHEAD: usize = 12288;
+    // The small helpers are the AVX2 kernels' own (inlined here, under these target features).
+    pub(in crate::llm::kernels) use super::super::avx2::x86::{f16, f16_pair, nibbles};
+    use super::super::avx2::x86::prefetch_next;
 
     /// `((l0+l4)+(l2+l6)) + ((l1+l5)+(l3+l7))`, as `reduce_lanes`.
     #[inline(always)]
