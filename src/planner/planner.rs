@@ -117,6 +117,8 @@ pub(crate) struct Run<'a> {
     start: Instant,
     /// The `random` planner's chooser, in place of the model (see [`Run::draw`]).
     rng: Option<StdRng>,
+    /// `focus` is every object of the scene (nothing narrowed it), so the root narrows it itself.
+    focus_is_scene: bool,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -132,7 +134,12 @@ pub(crate) fn run_tree(
         // No focus given: the whole scene (the character excluded).
         (true, Some(w)) => w.nodes().map(|n| n.id).filter(|&id| id != w.character()).collect(),
     };
+    let focus_is_scene = env.world().is_some_and(|w| {
+        let n = w.nodes().filter(|n| n.id != w.character()).count();
+        focus.iter().filter(|&&id| id != w.character()).count() >= n
+    });
     let mut run = Run {
+        focus_is_scene,
         model,
         env,
         req,
@@ -218,16 +225,12 @@ impl Run<'_> {
     /// subgoal's choices are about what it is about; a text that names none keeps the whole focus.
     /// The root does so only when its focus is the whole scene.
     fn node_focus(&self, node: NodeId) -> Result<Vec<u32>, StopCause> {
-        let w = self.world()?;
         // The root keeps a focus the request narrowed (a task's relevant objects); over the whole
         // scene, it too is narrowed to what its instruction names.
-        let scene_wide = || {
-            let n = w.nodes().filter(|n| n.id != w.character()).count();
-            self.focus.iter().filter(|&&id| id != w.character()).count() >= n
-        };
-        if !self.cfg.subgoal_focus || (node == self.tree.root() && !scene_wide()) {
+        if !self.cfg.subgoal_focus || (node == self.tree.root() && !self.focus_is_scene) {
             return Ok(self.focus.clone());
         }
+        let w = self.world()?;
         let named = named_objects(w, &self.focus, &self.tree.node(node).text);
         if named.is_empty() {
             return Ok(self.focus.clone());
@@ -397,7 +400,8 @@ impl Run<'_> {
                         let fresh = fresh_steps(list, &self.executed, &st.done_here);
                         // A node that has taken steps and has nothing new left to do is offered
                         // `done` (or a subgoal) rather than a repeat.
-                        if st.accepted > 0 && fresh.iter().all(|a| st.done_here.contains(a) || self.executed[self.executed.len().saturating_sub(RECENT)..].contains(a)) {
+                        let recent = recent(&self.executed);
+                        if st.accepted > 0 && fresh.iter().all(|a| st.done_here.contains(a) || recent.contains(a)) {
                             Vec::new()
                         } else {
                             fresh
@@ -444,7 +448,7 @@ impl Run<'_> {
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
             let text = if self.rng.is_some() {
-                match self.draw(node, &dg, &st) {
+                match self.draw(&dg, &st) {
                     Some(t) => t,
                     None => return Ok(End::Abandoned("random_steps")),
                 }
@@ -641,23 +645,19 @@ impl Run<'_> {
 }
 
 impl Run<'_> {
-    /// The `random` planner's decomposition, in place of the model's: at the root, an offered subgoal
-    /// line not yet taken, drawn uniformly (then `done`, or `random_actions` actions when nothing was
-    /// offered); below it, a uniform draw among the admitted actions until the node has executed
+    /// The `random` planner's decomposition, in place of the model's (it walks the tree only when
+    /// subgoals are offered; see `planner::plan`): at the root, an offered line not yet taken, drawn
+    /// uniformly; below it, a uniform draw among the admitted actions until the node has executed
     /// `random_steps` of them (or none is left), then `done`. Its only stopping rule is that fixed
     /// length: nothing in it looks at the goals' state.
     /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
-    fn draw(&mut self, node: NodeId, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
+    fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
         let rng = self.rng.as_mut().expect("draw is called for the random planner only");
-        let per_node = if node == self.tree.root() && self.req.subgoals.is_empty() {
-            self.cfg.random_actions
-        } else {
-            self.cfg.random_steps
-        };
         if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
             return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
         }
-        let drawn = if st.done_here.len() < per_node { super::baseline::draw(&dg.actions, rng) } else { None };
+        let drawn =
+            if st.done_here.len() < self.cfg.random_steps { super::baseline::draw(&dg.actions, rng) } else { None };
         match drawn {
             Some(a) => Some(format!("action: {a}")),
             None => dg.allow_done.then(|| "done".to_string()),
@@ -704,7 +704,7 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
     use crate::action::Verb;
     let moves = |a: &Action| matches!(a.verb, Verb::Walk | Verb::Run);
     let after_move = executed.last().is_some_and(moves);
-    let recent = &executed[executed.len().saturating_sub(RECENT)..];
+    let recent = recent(executed);
     let fresh: Vec<Action> = list
         .iter()
         .filter(|a| !(after_move && moves(a)) && !recent.contains(a) && !done_here.contains(a))
@@ -719,6 +719,11 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
 
 /// How many of the run's latest actions [`fresh_steps`] keeps from being chosen again.
 pub const RECENT: usize = 3;
+
+/// The run's last [`RECENT`] actions.
+fn recent(executed: &[Action]) -> &[Action] {
+    &executed[executed.len().saturating_sub(RECENT)..]
+}
 
 /// "step: why", without repeating the step when the reason already names it (executor messages do).
 fn rejection(step: &str, reason: &str) -> String {
