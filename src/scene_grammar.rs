@@ -3,7 +3,7 @@
 //! the planner's grammar family through the LLM runtime, the one place the two sides are joined in
 //! tests.
 
-use crate::action::{ObjRef, Verb};
+use crate::action::{Action, ObjRef, Verb};
 use crate::grammar::{ActionGrammar, ActionSet, Strength, VerbSpec};
 use crate::world::affordance::SlotRequirement;
 use crate::world::World;
@@ -39,6 +39,33 @@ pub fn typed_set(world: &World, ids: &[u32]) -> ActionSet {
         }
     }
     ActionSet::Slots(verbs, objects)
+}
+
+/// Every action of the `typed` set over `ids`, listed one by one (verbs as in [`Verb::ALL`], then
+/// objects by id), without actions naming one object twice. The planner offers those that cannot
+/// run yet as subgoals ("make this action possible, then do it"); verbs without objects are left out.
+pub fn typed_actions(world: &World, ids: &[u32]) -> Vec<Action> {
+    let objects = scene_objects(world, ids);
+    let fits = |v: Verb, i: usize| -> Vec<ObjRef> {
+        let need = SlotRequirement::of(v, i);
+        objects.iter().filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n))).cloned().collect()
+    };
+    let mut out = Vec::new();
+    for &verb in Verb::ALL {
+        match verb.arity() {
+            1 => out.extend(fits(verb, 0).into_iter().map(|o| Action { verb, args: vec![o] })),
+            2 => {
+                let second = fits(verb, 1);
+                for a in fits(verb, 0) {
+                    for b in second.iter().filter(|b| b.id != a.id) {
+                        out.push(Action { verb, args: vec![a.clone(), b.clone()] });
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    out
 }
 
 /// `feasible`: exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]),

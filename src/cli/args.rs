@@ -118,6 +118,18 @@ pub struct DecisionArgs {
     /// text names, and what holds them, when it names any).
     #[arg(long)]
     pub no_subgoal_focus: bool,
+    /// Let subgoals be only the goal lines or free text (by default a node may also name an action
+    /// over its objects that cannot run yet: a target, worked towards below it).
+    #[arg(long)]
+    pub no_target_subgoals: bool,
+    /// Let the model choose the steps below a target among the feasible actions (by default the
+    /// world gives the next step towards the target's action: the step its failure names).
+    #[arg(long)]
+    pub no_target_steps: bool,
+    /// Reach each offered goal line with one chosen step (an action, or a target worked out below
+    /// it), instead of steps until the model says `done` there.
+    #[arg(long)]
+    pub single_step_lines: bool,
 }
 
 impl DecisionArgs {
@@ -128,5 +140,8 @@ impl DecisionArgs {
         cfg.choose = self.choose;
         cfg.goal_subgoals = !self.free_subgoals;
         cfg.subgoal_focus = !self.no_subgoal_focus;
+        cfg.target_subgoals = !self.no_target_subgoals;
+        cfg.target_steps = !self.no_target_steps;
+        cfg.single_step_lines = self.single_step_lines;
     }
 }

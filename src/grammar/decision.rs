@@ -439,6 +439,17 @@ pub enum Proposal {
 }
 
 impl DecomposeGrammar {
+    /// The one line this grammar admits, when it admits exactly one (a single action, no subgoal,
+    /// no `done`): the caller need not ask a model.
+    pub fn only_choice(&self) -> Option<String> {
+        match &self.actions {
+            ActionSet::Exact(list) if list.len() == 1 && !self.allow_subgoal && !self.allow_done => {
+                Some(format!("action: {}", list[0]))
+            }
+            _ => None,
+        }
+    }
+
     /// Subgoals, actions from `actions` and `done` all allowed.
     pub fn new(actions: ActionSet, subgoal_chars: usize) -> Self {
         Self { actions, subgoal_chars, allow_subgoal: true, allow_done: true, subgoal_menu: Vec::new() }

@@ -168,6 +168,18 @@ pub struct PlannerConfig {
     /// When the protocol shows the goals, offer them to the root as its subgoals (one per goal line)
     /// instead of letting it write its own.
     pub goal_subgoals: bool,
+    /// Offer a node, as its subgoals, the actions over its objects that cannot run yet (a target:
+    /// "make this action possible, then do it"), written as the action; a target node proposes
+    /// actions and is done when its action runs. Feasible grammar only; not for the root's goal lines.
+    pub target_subgoals: bool,
+    /// Below a target subgoal the one step offered is the world's next step towards its action
+    /// (`World::first_step_towards`: the step each failure names, followed back); the model chose the
+    /// target, the embodiment knows the way. Off: the model chooses among the feasible actions.
+    pub target_steps: bool,
+    /// A goal line offered to the root is reached by one step: its node is complete once one child
+    /// (an action, or a target whose action ran) has been accepted, instead of when the model says
+    /// `done` there. A fixed structure (one chosen action a goal line), not a look at the goals' state.
+    pub single_step_lines: bool,
     /// DIAGNOSTIC ONLY: stop when `PlanRequest::oracle` says the goal holds (see there).
     pub oracle_stop: bool,
     /// Ask the termination model about an action the symbolic check already found runnable (it can
@@ -202,6 +214,9 @@ impl Default for PlannerConfig {
             random_steps: 10,
             subgoal_focus: true,
             goal_subgoals: true,
+            target_subgoals: true,
+            target_steps: true,
+            single_step_lines: false,
             oracle_stop: false,
             judge_actions: false,
             fresh_steps: true,
@@ -409,6 +424,9 @@ impl PlannerConfig {
             "random_steps": self.random_steps,
             "subgoal_focus": self.subgoal_focus,
             "goal_subgoals": self.goal_subgoals,
+            "target_subgoals": self.target_subgoals,
+            "target_steps": self.target_steps,
+            "single_step_lines": self.single_step_lines,
             "oracle_stop": self.oracle_stop,
             "judge_actions": self.judge_actions,
             "fresh_steps": self.fresh_steps,
@@ -478,6 +496,9 @@ impl PlannerConfig {
         c.fresh_steps = v.get("fresh_steps").and_then(Value::as_bool).unwrap_or(false);
         c.subgoal_focus = v.get("subgoal_focus").and_then(Value::as_bool).unwrap_or(false);
         c.goal_subgoals = v.get("goal_subgoals").and_then(Value::as_bool).unwrap_or(false);
+        c.target_subgoals = v.get("target_subgoals").and_then(Value::as_bool).unwrap_or(false);
+        c.target_steps = v.get("target_steps").and_then(Value::as_bool).unwrap_or(false);
+        c.single_step_lines = v.get("single_step_lines").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,

@@ -22,7 +22,9 @@ use super::prompt::{NodeView, Prompter};
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
 use super::{ActionChoice, CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
-use crate::action::Action;
+use crate::action::{Action, Verb};
+use crate::grammar::Strength;
+use crate::scene_grammar::typed_actions;
 use crate::llm::engine::{Generate, Prompt, Score, StopReason};
 use crate::llm::LlmError;
 use crate::world::vocab::Relation;
@@ -74,8 +76,11 @@ struct NodeLoop {
     /// After a subgoal of this node is rejected, given up or echoes the node's own goal, the node
     /// proposes actions only until one runs: a greedy model otherwise writes the same subgoal again.
     concrete_only: bool,
-    /// The offered subgoal lines (the root's menu) already taken, done or given up.
+    /// The offered subgoal lines (goal lines or target actions) already taken, done or given up.
     tried: Vec<String>,
+    /// Actions the run had executed when this node's expansion began (the random chooser counts
+    /// the steps taken below a node from it).
+    start_actions: usize,
 }
 
 impl NodeLoop {
@@ -119,6 +124,8 @@ pub(crate) struct Run<'a> {
     rng: Option<StdRng>,
     /// `focus` is every object of the scene (nothing narrowed it), so the root narrows it itself.
     focus_is_scene: bool,
+    /// The nodes that are target subgoals, with their action (see [`PlannerConfig::target_subgoals`]).
+    targets: std::collections::HashMap<NodeId, Action>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -153,6 +160,7 @@ pub(crate) fn run_tree(
         executed: Vec::new(),
         start: Instant::now(),
         rng: (cfg.kind == PlannerKind::Random).then(|| StdRng::seed_from_u64(cfg.random_seed)),
+        targets: Default::default(),
     };
     run.node_event(0);
     let root = run.tree.root();
@@ -249,6 +257,36 @@ impl Run<'_> {
         Ok(out)
     }
 
+    /// The target subgoals a decision at `node` may write (line, action): the actions of the
+    /// `typed` set over the node's objects that cannot run now (the runnable ones are offered as
+    /// actions) and that the world knows a way to, moves left out (a walk is never out of reach),
+    /// each taken at most once per node.
+    /// `feasible` is the node's feasible set. Empty unless [`PlannerConfig::target_subgoals`] and
+    /// the feasible grammar are on and the node may have subgoals at all (`allowed`).
+    fn target_menu(
+        &self,
+        node: NodeId,
+        feasible: &ActionSet,
+        allowed: bool,
+        st: &NodeLoop,
+    ) -> Result<Vec<(String, Action)>, StopCause> {
+        let ActionSet::Exact(feasible) = feasible else { return Ok(Vec::new()) };
+        if !allowed || !self.cfg.target_subgoals || self.mode == ContextMode::NoSubgoalTree {
+            return Ok(Vec::new());
+        }
+        let w = self.world()?;
+        // Only targets the world knows a way to: not an affordance error, not already so.
+        let menu = typed_actions(w, &self.node_focus(node)?)
+            .into_iter()
+            .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
+            .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
+            .filter(|a| w.reaches(a))
+            .map(|a| (a.to_string(), a))
+            .filter(|(line, _)| !st.tried.contains(line))
+            .collect();
+        Ok(menu)
+    }
+
     /// The context of a decision at `node`.
     fn view(&self, node: NodeId, previous: Option<&str>, rejected: Option<&str>) -> NodeView {
         let observation = self.env.observe(self.cfg.observe_budget);
@@ -260,6 +298,7 @@ impl Run<'_> {
                 previous: previous.map(str::to_string),
                 history: None,
                 rejected: rejected.map(str::to_string),
+                blocked: None,
             },
             ContextMode::NoTree => NodeView {
                 observation,
@@ -267,6 +306,7 @@ impl Run<'_> {
                 previous: None,
                 history: history(),
                 rejected: rejected.map(str::to_string),
+                blocked: None,
             },
             ContextMode::NoSubgoalTree => NodeView {
                 observation,
@@ -274,6 +314,7 @@ impl Run<'_> {
                 previous: None,
                 history: history(),
                 rejected: rejected.map(str::to_string),
+                blocked: None,
             },
         }
     }
@@ -376,10 +417,20 @@ impl Run<'_> {
     fn expand(&mut self, node: NodeId) -> Result<End, StopCause> {
         let depth = self.tree.node(node).depth;
         let budgets = self.cfg.budgets.clone();
-        let mut st = NodeLoop::default();
+        let mut st = NodeLoop { start_actions: self.executed.len(), ..NodeLoop::default() };
+        // A target subgoal is done when its action runs (see `PlannerConfig::target_subgoals`).
+        let target = self.targets.get(&node).cloned();
         // The root is bounded by the run's budgets (calls, actions, deadline) alone: abandoning it
         // ends the run, and a plan needs more steps than a subgoal.
         let is_root = node == self.tree.root();
+        // Below an offered line the node proposes actions: the line already is the subgoal, and
+        // names its objects (tiny models' own subgoals there were found to drift off them).
+        let under_offered = !is_root
+            && self.tree.node(node).parent == Some(self.tree.root())
+            && self.req.subgoals.contains(&self.tree.node(node).text);
+        // With `single_step_lines`, such a node is complete once one step (an action, or a target
+        // whose action ran) has been accepted.
+        let one_step = under_offered && self.cfg.single_step_lines;
         loop {
             if !is_root && st.replans > budgets.max_replans {
                 return Ok(End::Abandoned("replans"));
@@ -388,12 +439,21 @@ impl Run<'_> {
                 return Ok(End::Abandoned("children"));
             }
             self.check_global()?;
-            let view = self.view(node, st.previous.as_deref(), st.rejected.as_deref());
+            let mut view = self.view(node, st.previous.as_deref(), st.rejected.as_deref());
+            if let Some(t) = &target {
+                view.blocked = self.world()?.why_not(t).map(|f| f.message);
+            }
             // An action this node has just rejected is not proposed again until the state changes;
             // only exact sets can drop one. With `fresh_steps`, steps that repeat recent ones are
             // dropped too; without, at least the action the node has just executed (a greedy tiny
             // model otherwise repeats one step forever).
-            let actions = match self.action_set(node)? {
+            let set = self.action_set(node)?;
+            // The root's subgoals are the request's offered lines (a task's goals in words) not yet
+            // taken; once all are taken it proposes actions or `done`.
+            let offered = is_root && !self.req.subgoals.is_empty();
+            let may_target = target.is_none() && !offered && depth + 1 < budgets.max_depth && !st.concrete_only;
+            let targets = self.target_menu(node, &set, may_target, &st)?;
+            let actions = match set {
                 ActionSet::Exact(list) => {
                     let list: Vec<Action> = list.into_iter().filter(|a| !st.refused.contains(a)).collect();
                     ActionSet::Exact(if self.cfg.fresh_steps {
@@ -412,9 +472,22 @@ impl Run<'_> {
                 }
                 set => set,
             };
-            // The root's subgoals are the request's offered lines (a task's goals in words) not yet
-            // taken; once all are taken it proposes actions or `done`.
-            let offered = is_root && !self.req.subgoals.is_empty();
+            // With target steps, a target node's one step is the world's next step towards its action.
+            let toward = match (&target, self.cfg.target_steps) {
+                (Some(t), true) => Some(self.world()?.first_step_towards(t)),
+                _ => None,
+            };
+            let actions = match (toward, actions) {
+                (Some(Some(step)), _) if !self.cfg.excluded_verbs.contains(&step.verb) => ActionSet::Exact(vec![step]),
+                (Some(_), _) => return Ok(End::Abandoned("unreachable")),
+                // Targets are written as actions: the model names the action it wants done, and one
+                // that cannot run yet becomes a subgoal worked out below it.
+                (None, ActionSet::Exact(mut list)) if !targets.is_empty() => {
+                    list.extend(targets.iter().map(|(_, a)| a.clone()));
+                    ActionSet::Exact(list)
+                }
+                (None, actions) => actions,
+            };
             let subgoal_menu: Vec<String> = if offered {
                 self.req.subgoals.iter().filter(|l| !st.tried.contains(l)).cloned().collect()
             } else {
@@ -425,29 +498,35 @@ impl Run<'_> {
             if offered && subgoal_menu.is_empty() {
                 return Ok(End::Complete);
             }
-            // Below an offered line the node proposes actions: the line already is the subgoal, and
-            // names its objects (tiny models' own subgoals there were found to drift off them).
-            let under_offered = !is_root
-                && self.tree.node(node).parent == Some(self.tree.root())
-                && self.req.subgoals.contains(&self.tree.node(node).text);
+            // With target subgoals, a node's only subgoals are its targets (free text is not offered:
+            // tiny models' own subgoals were found to echo or drift), and a target node proposes
+            // actions only.
+            let with_targets = self.cfg.target_subgoals && !offered && self.cfg.strength == Strength::Feasible;
             let allow_subgoal = self.mode != ContextMode::NoSubgoalTree
                 && depth + 1 < budgets.max_depth
                 // (a root with lines left takes the next one: a taken line is never offered again)
                 && (!st.concrete_only || offered)
+                && target.is_none()
+                && !with_targets
                 && !under_offered
                 && (!offered || !subgoal_menu.is_empty());
             // `done` before any step would end a goal with nothing done; it is offered once a child
             // has been accepted, once every offered subgoal was taken, or when nothing else can be
             // written.
-            let allow_done =
-                st.accepted > 0 || (offered && subgoal_menu.is_empty()) || (!allow_subgoal && actions.is_empty());
+            // (a target node with target steps ends when its action runs, not when the model says so)
+            let allow_done = !(target.is_some() && self.cfg.target_steps)
+                && (st.accepted > 0 || (offered && subgoal_menu.is_empty()) || (!allow_subgoal && actions.is_empty()));
             // While offered lines remain, the root decomposes into them (actions come below them):
             // given the choice, both models wrote actions at the root and never took a line.
             let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
             let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done, subgoal_menu };
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
-            let text = if self.rng.is_some() {
+            let only = dg.only_choice();
+            let text = if let Some(line) = only {
+                // One admissible answer: asking a model (or drawing) could not change it.
+                line
+            } else if self.rng.is_some() {
                 match self.draw(&dg, &st) {
                     Some(t) => t,
                     None => return Ok(End::Abandoned("random_steps")),
@@ -471,6 +550,8 @@ impl Run<'_> {
             let (child_text, child_action) = match &proposal {
                 Proposal::Done => return Ok(End::Complete),
                 Proposal::Subgoal(s) => (s.clone(), None),
+                // A target: a subgoal named by its action.
+                Proposal::Action(a) if targets.iter().any(|(_, t)| t == a) => (a.to_string(), None),
                 Proposal::Action(a) => (a.to_string(), Some(a.clone())),
             };
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
@@ -495,7 +576,11 @@ impl Run<'_> {
             if let (Some(a), true, false) = (&child_action, self.cfg.symbolic_check, self.cfg.judge_actions) {
                 self.set_status(child, Status::Mapped { action: a.clone() }, "an action (the world checks it)");
                 let r = self.execute(child, a)?;
+                let ran = r.is_ok();
                 st.executed(&child_text, a, r, &mut self.stats);
+                if ran && (target.as_ref() == Some(a) || one_step) {
+                    return Ok(End::Complete);
+                }
                 continue;
             }
 
@@ -503,7 +588,18 @@ impl Run<'_> {
             // whether one action does it is found by decomposing it (its first action, then `done`):
             // it is decomposed without a verdict, as the random chooser does. A tiny model's verdicts
             // on such lines were found to be replans with made-up reasons.
-            let offered_child = child_action.is_none() && is_root && self.req.subgoals.contains(&child_text);
+            // A target subgoal is congruent and not runnable now by construction: decomposed too.
+            let target_child = if child_action.is_none() {
+                targets.iter().find(|(line, _)| *line == child_text).map(|(_, a)| a.clone())
+            } else {
+                None
+            };
+            if let Some(t) = &target_child {
+                self.targets.insert(child, t.clone());
+                st.tried.push(child_text.clone());
+            }
+            let offered_child = child_action.is_none()
+                && ((is_root && self.req.subgoals.contains(&child_text)) || target_child.is_some());
 
             // The verdict on the new child. A proposed action can only be executed or rejected, so
             // its grammar names that one action (the verdict is mostly forced tokens, still the
@@ -570,10 +666,17 @@ impl Run<'_> {
                             st.accepted += 1;
                             st.previous = Some(format!("{child_text}: done"));
                             st.rejected = None;
+                            if one_step {
+                                return Ok(End::Complete);
+                            }
                         }
                         End::Abandoned(budget) => {
                             self.stats.abandoned += 1;
-                            self.set_status(child, Status::Abandoned, format!("{budget} budget"));
+                            let why = match budget {
+                                "unreachable" => "the world names no way to its action from here".to_string(),
+                                b => format!("{b} budget"),
+                            };
+                            self.set_status(child, Status::Abandoned, why);
                             // The parent goes on, told that this step was given up; it counts as a
                             // rejected attempt so a parent cannot abandon children forever.
                             st.replans += 1;
@@ -586,7 +689,11 @@ impl Run<'_> {
                 Verdict::Execute(a) => {
                     self.set_status(child, Status::Mapped { action: a.clone() }, "one action");
                     let r = self.execute(child, &a)?;
+                    let ran = r.is_ok();
                     st.executed(&child_text, &a, r, &mut self.stats);
+                    if ran && (target.as_ref() == Some(&a) || one_step) {
+                        return Ok(End::Complete);
+                    }
                 }
             }
         }
@@ -653,12 +760,27 @@ impl Run<'_> {
     /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
     fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
         let rng = self.rng.as_mut().expect("draw is called for the random planner only");
-        if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
-            return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
+        let menu: &[String] = if dg.allow_subgoal { &dg.subgoal_menu } else { &[] };
+        // The root's goal lines come first (no actions are offered beside them).
+        let actions = match &dg.actions {
+            ActionSet::Exact(list) => list.len(),
+            _ => 0,
+        };
+        if !menu.is_empty() && actions == 0 {
+            return Some(format!("subgoal: {}", menu[rng.random_range(0..menu.len())]));
         }
-        let drawn =
-            if st.done_here.len() < self.cfg.random_steps { super::baseline::draw(&dg.actions, rng) } else { None };
-        match drawn {
+        // Steps taken below this node, in its target subgoals too.
+        if self.executed.len() - st.start_actions >= self.cfg.random_steps {
+            return dg.allow_done.then(|| "done".to_string());
+        }
+        // One uniform draw over everything admitted: target subgoals and actions alike.
+        if !menu.is_empty() {
+            let i = rng.random_range(0..menu.len() + actions);
+            if i < menu.len() {
+                return Some(format!("subgoal: {}", menu[i]));
+            }
+        }
+        match super::baseline::draw(&dg.actions, rng) {
             Some(a) => Some(format!("action: {a}")),
             None => dg.allow_done.then(|| "done".to_string()),
         }
@@ -701,7 +823,6 @@ fn echoes(subgoal: &str, goal: &str) -> bool {
 /// again and cycles. The embodiment's rule, not a task's; every planner that chooses actions one at a
 /// time obeys it, the random one included, so figures stay comparable.
 pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[Action]) -> Vec<Action> {
-    use crate::action::Verb;
     let moves = |a: &Action| matches!(a.verb, Verb::Walk | Verb::Run);
     let after_move = executed.last().is_some_and(moves);
     let recent = recent(executed);

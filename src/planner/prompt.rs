@@ -47,6 +47,8 @@ pub struct NodeView {
     pub history: Option<Vec<String>>,
     /// The last rejected or failed attempt at this step, with why.
     pub rejected: Option<String>,
+    /// Why a target subgoal's action cannot run yet (the executor's message, naming what to do first).
+    pub blocked: Option<String>,
 }
 
 /// Builds the prompts of one run.
@@ -72,6 +74,9 @@ impl Prompter {
         s.push_str(v.observation.trim_end());
         s.push('\n');
         s.push_str(&format!("Goal: {}\n", v.goal));
+        if let Some(b) = &v.blocked {
+            s.push_str(&format!("Not yet: {b}\n"));
+        }
         if let Some(h) = &v.history {
             if h.is_empty() {
                 s.push_str("Actions so far: none\n");

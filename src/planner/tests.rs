@@ -84,8 +84,9 @@ const GRAB_APPLE: &str = "[GRAB] <apple> (12)";
 
 /// The paper's Algorithm 1 as written: the termination model judges every child, actions included
 /// (the default asks it about subgoals only; `the_world_is_the_verdict_on_runnable_actions` tests that).
+/// Subgoals are free text here (target subgoals, the default, have their own tests below).
 fn cfg() -> PlannerConfig {
-    PlannerConfig { judge_actions: true, fresh_steps: false, ..PlannerConfig::default() }
+    PlannerConfig { judge_actions: true, fresh_steps: false, target_subgoals: false, ..PlannerConfig::default() }
 }
 
 fn run_with(model: &mut Scripted, env: &mut dyn Env, cfg: &PlannerConfig) -> PlanOutcome {
@@ -496,7 +497,7 @@ fn a_subgoal_repeating_its_goal_is_rejected_unjudged_and_the_node_turns_to_actio
             "replan: congruence: not yet",
             "done",
         ],
-        &PlannerConfig::default(),
+        &PlannerConfig { target_subgoals: false, ..PlannerConfig::default() },
     );
     assert_eq!(out.tree.node(1).status, Status::Replanned);
     assert!(m.grammars[0].contains("subgoal: "), "{}", m.grammars[0]);
@@ -640,9 +641,16 @@ fn the_random_chooser_walks_the_offered_lines_with_a_fixed_number_of_steps_each(
     assert_eq!(taken.len(), 2, "each line once: {taken:?}");
     for &c in &root.children {
         let n = a.tree.node(c);
-        assert!(n.children.len() <= 3, "at most random_steps actions under {}", n.text);
+        assert!(n.children.len() <= 3, "at most random_steps draws under {}", n.text);
     }
-    assert!(a.executed.len() <= 6 && !a.executed.is_empty(), "{:?}", a.executed);
+    assert!(!a.executed.is_empty());
+    // Without targets each draw is one action, so the plan has at most random_steps a line.
+    let plain = |seed| PlannerConfig { target_subgoals: false, ..cfg(seed) };
+    for seed in 0..4 {
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let out = plan(&mut Scripted::new(&[]), &mut env, &offered(&lines), &plain(seed), &mut TraceWriter::sink());
+        assert!(out.executed.len() <= 6 && !out.executed.is_empty(), "{:?}", out.executed);
+    }
 }
 
 #[test]
@@ -673,4 +681,78 @@ fn the_root_narrows_a_scene_wide_focus_to_what_the_instruction_names_and_keeps_a
     let req = PlanRequest::new("put the apple in the fridge", vec![10, 12, 30]);
     plan(&mut m, &mut env, &req, &PlannerConfig::default(), &mut TraceWriter::sink());
     assert!(admits(&m.grammars[0], "WALK", "<sofa> (30)"), "{}", m.grammars[0]);
+}
+
+const PUTIN: &str = "[PUTIN] <apple> (12) <fridge> (10)";
+
+#[test]
+fn an_action_that_cannot_run_yet_becomes_a_target_worked_out_by_the_world() {
+    let (out, m) = run(&[&format!("action: {PUTIN}"), "done"], &PlannerConfig::default());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
+    assert_eq!(
+        plan_lines(&out),
+        [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", PUTIN],
+        "the steps its failures name (the apple lies by the fridge), then the target itself"
+    );
+    // The root's grammar offers the target beside the runnable actions.
+    assert!(m.grammars[0].contains("\"[PUTIN] \""), "{}", m.grammars[0]);
+    assert!(admits(&m.grammars[0], "WALK", "<apple> (12)"));
+    let t = out.tree.node(1);
+    assert_eq!((t.text.as_str(), t.action.is_none(), &t.status), (PUTIN, true, &Status::Executed));
+    assert_eq!(t.children.len(), 4);
+    // Below the target there is one admissible step each time: no model call is made for it.
+    assert_eq!(out.stats.llm_calls, 2);
+    assert!(m.prompts[1].contains(&format!("Previous step: {PUTIN}: done")), "{}", m.prompts[1]);
+}
+
+#[test]
+fn without_target_steps_the_model_chooses_the_steps_and_sees_what_is_missing() {
+    let c = PlannerConfig { target_steps: false, ..PlannerConfig::default() };
+    let (out, m) = run(
+        &[&format!("action: {PUTIN}"), &format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done", "done"],
+        &c,
+    );
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE]);
+    assert!(m.prompts[1].contains(&format!("Goal: {PUTIN}")), "{}", m.prompts[1]);
+    assert!(m.prompts[1].contains("Not yet: ") && m.prompts[1].contains("GRAB <apple> (12) first"), "{}", m.prompts[1]);
+    // The model's `done` ended the target before its action ran (its own decision).
+    assert_eq!(out.tree.node(1).status, Status::Executed);
+}
+
+#[test]
+fn targets_are_not_offered_when_already_so_or_impossible_and_not_without_the_flag() {
+    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &PlannerConfig::default());
+    // The demo fridge is closed: CLOSE changes nothing; SIT on it is an affordance error.
+    for (verb, obj) in [("CLOSE", "<fridge> (10)"), ("SIT", "<fridge> (10)")] {
+        assert!(!admits(&m.grammars[0], verb, obj), "{verb} {obj} offered:\n{}", m.grammars[0]);
+    }
+    let c = PlannerConfig { target_subgoals: false, ..PlannerConfig::default() };
+    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &c);
+    assert!(!m.grammars[0].contains("\"[PUTIN] \""), "{}", m.grammars[0]);
+}
+
+#[test]
+fn with_single_step_lines_a_goal_line_is_complete_after_its_one_step() {
+    let lines = [APPLE_IN_FRIDGE, "television is ON"];
+    let c = PlannerConfig { single_step_lines: true, ..PlannerConfig::default() };
+    let mut m = Scripted::new(&[
+        &format!("subgoal: {APPLE_IN_FRIDGE}"),
+        &format!("action: {PUTIN}"),
+        "subgoal: television is ON",
+        "action: [WALK] <television> (31)",
+    ]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&lines), &c, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
+    // No `done` was asked for: each line ended with its step (a target, then a plain action).
+    assert_eq!(m.prompts.len(), 4);
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", PUTIN, "[WALK] <television> (31)"]);
+    let root = out.tree.node(out.tree.root());
+    assert!(root.children.iter().all(|&c| out.tree.node(c).status == Status::Executed));
+    // Off (the default), the line goes on until the model says `done`.
+    let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {PUTIN}"), "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &PlannerConfig::default(), &mut TraceWriter::sink());
+    assert_eq!((m.prompts.len(), out.stop), (3, StopCause::Done));
 }

@@ -28,6 +28,54 @@ impl World {
         self.check(action).err()
     }
 
+    /// The runnable action that starts the way to `target`: `target` itself when it can run now;
+    /// else the step its failure names ("...; OPEN <fridge> (10) first"), followed the same way
+    /// (GRAB needs a WALK first, and so on). `None`: no such step is named (an affordance error, a
+    /// tool to find, hands to free) or the chain is longer than a few steps.
+    pub fn first_step_towards(&self, target: &Action) -> Option<Action> {
+        let mut step = target.clone();
+        for _ in 0..6 {
+            match self.why_not(&step) {
+                None => return Some(step),
+                Some(f) => step = self.named_fix(&f.message)?,
+            }
+        }
+        None
+    }
+
+    /// Whether following [`World::first_step_towards`] from here (on a copy) ends with `target`
+    /// running: a target whose way leads only to an affordance error (SIT on a fridge: walk there,
+    /// then fail) or to nothing is not reachable.
+    pub fn reaches(&self, target: &Action) -> bool {
+        let mut w = self.clone();
+        for _ in 0..8 {
+            let Some(step) = w.first_step_towards(target) else { return false };
+            if w.execute(&step).is_err() {
+                return false;
+            }
+            if step == *target {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The action a failure message names as the fix, when it names exactly one: the executor's
+    /// messages end with "; VERB [to] <name> (id) first" or "; VERB first" (checks.rs, verbs.rs).
+    fn named_fix(&self, message: &str) -> Option<Action> {
+        let fix = message.rsplit("; ").next()?.strip_suffix(" first")?;
+        let (verb, rest) = fix.split_once(' ').unwrap_or((fix, ""));
+        let verb: Verb = verb.parse().ok()?;
+        let rest = rest.trim_start_matches("to ").trim();
+        let args = if rest.is_empty() {
+            Vec::new()
+        } else {
+            let id: u32 = rest.rsplit_once('(')?.1.strip_suffix(')')?.parse().ok()?;
+            vec![ObjRef::new(self.node(id)?.class_name, id)]
+        };
+        (args.len() == verb.arity()).then_some(Action { verb, args })
+    }
+
     fn candidates(&self, ids: Option<&[u32]>) -> Vec<ObjRef> {
         let ch = self.character();
         let mut v: Vec<ObjRef> = match ids {
@@ -133,6 +181,29 @@ mod tests {
         }
         assert_eq!(w.feasible_actions(), brute_force(&w));
         assert_eq!(states_checked, plan.len());
+    }
+
+    #[test]
+    fn the_first_step_towards_an_action_follows_the_named_fixes() {
+        let mut w = World::demo();
+        let target = a(Verb::PutIn, &[("apple", 12), ("fridge", 10)]);
+        let mut steps = Vec::new();
+        while let Some(s) = w.first_step_towards(&target) {
+            w.execute(&s).unwrap();
+            steps.push(s.to_string());
+            if s == target || steps.len() > 8 {
+                break;
+            }
+        }
+        assert_eq!(
+            steps,
+            // (the apple lies on the counter by the fridge: no second walk)
+            ["[WALK] <apple> (12)", "[GRAB] <apple> (12)", "[OPEN] <fridge> (10)", "[PUTIN] <apple> (12) <fridge> (10)"]
+        );
+        assert!(World::demo().reaches(&target));
+        // SIT on a fridge: the way starts with a walk and ends in an affordance error.
+        assert!(!World::demo().reaches(&a(Verb::Sit, &[("fridge", 10)])));
+        assert!(World::demo().reaches(&a(Verb::Sit, &[("sofa", 30)])));
     }
 
     #[test]
