@@ -62,9 +62,21 @@ pub enum StopReason {
 pub struct Timings {
     pub prefill_ms: f64,
     pub decode_ms: f64,
-    /// Time spent computing each token mask, in microseconds, one entry per sampled token.
+    /// Time spent computing each token mask and applying it to the logits, in microseconds, one
+    /// entry per sampled token.
     pub mask_us: Vec<f64>,
     pub grammar_compile_ms: f64,
+    /// The parts of `decode_ms`, so a slow decode can be told apart without a profiler:
+    /// one-token forward passes (after each chosen token),
+    pub forward_ms: f64,
+    /// forward passes over grammar-forced tokens (one per run of them),
+    pub forced_forward_ms: f64,
+    /// grammar work besides the masks (finding forced tokens, committing chosen ones),
+    pub grammar_ms: f64,
+    /// choosing tokens from the logits,
+    pub sample_ms: f64,
+    /// and decoding text for the streaming callback. The rest of `decode_ms` is loop overhead.
+    pub stream_ms: f64,
 }
 
 /// One generation's result.
@@ -358,11 +370,15 @@ impl Engine {
         let stop = loop {
             if let Some(c) = constraint.as_mut() {
                 // Fast-forward: tokens the grammar forces are appended and run in one pass.
+                let t = Instant::now();
                 let forced = c.forced_tokens()?;
+                timings.grammar_ms += ms(t);
                 forced_count += forced.len();
                 out.extend_from_slice(&forced);
                 if !forced.is_empty() {
+                    let t = Instant::now();
                     stream.push(&self.tokenizer, &out, &mut on_text);
+                    timings.stream_ms += ms(t);
                 }
                 if c.is_finished() {
                     break StopReason::GrammarComplete;
@@ -371,7 +387,9 @@ impl Engine {
                     if self.cached.len() + forced.len() > context {
                         break StopReason::Context;
                     }
+                    let t = Instant::now();
                     logits = self.forward(&forced)?;
+                    timings.forced_forward_ms += ms(t);
                 }
             }
             if out.len() >= opts.max_tokens {
@@ -389,15 +407,21 @@ impl Engine {
                 mask.apply_to_logits(&mut logits)?;
                 timings.mask_us.push(t.elapsed().as_secs_f64() * 1e6);
             }
+            let t = Instant::now();
             let tok = sampler.choose(&logits)?;
+            timings.sample_ms += ms(t);
             if self.tokenizer.is_eos(tok) {
                 break StopReason::Eos;
             }
             if let Some(c) = constraint.as_mut() {
+                let t = Instant::now();
                 c.commit(tok)?;
+                timings.grammar_ms += ms(t);
             }
             out.push(tok);
+            let t = Instant::now();
             stream.push(&self.tokenizer, &out, &mut on_text);
+            timings.stream_ms += ms(t);
             if constraint.as_ref().is_some_and(|c| c.is_finished()) {
                 break StopReason::GrammarComplete;
             }
@@ -405,7 +429,9 @@ impl Engine {
             if self.cached.len() + 1 > context {
                 break StopReason::Context;
             }
+            let t = Instant::now();
             logits = self.forward(&[tok])?;
+            timings.forward_ms += ms(t);
         };
         timings.decode_ms = ms(t_decode);
         let text = self.tokenizer.decode(&out, true)?;
