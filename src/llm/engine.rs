@@ -415,8 +415,7 @@ impl Engine {
             }
             if let Some(c) = constraint.as_mut() {
                 let t = Instant::now();
-                let mask = c.mask()?;
-                mask.apply_to_logits(&mut logits)?;
+                c.apply_mask(&mut logits)?;
                 timings.mask_us.push(t.elapsed().as_secs_f64() * 1e6);
             }
             let t = Instant::now();
