@@ -457,23 +457,36 @@ impl Engine {
     }
 }
 
-/// What has been streamed so far. The text of the tokens so far is decoded whole each time (outputs
-/// are short) and only a grown, character-complete prefix is passed on.
+/// What has been streamed so far. Each push decodes only the tokens after the last piece passed on,
+/// with the one piece before them as context (a tokenizer may decode a text's first token
+/// differently, e.g. without its leading space), so the cost per token stays flat however long the
+/// output grows. Only a grown, character-complete text is passed on.
 #[derive(Default)]
 struct Stream {
     sent: String,
+    /// `out[..done]` has been passed on; `out[context..done]` is the last piece's tokens.
+    done: usize,
+    context: usize,
 }
 
 impl Stream {
     fn push(&mut self, tok: &GgufTokenizer, out: &[u32], on_text: &mut Option<&mut dyn FnMut(&str)>) {
         let Some(f) = on_text.as_mut() else { return };
-        let Ok(text) = tok.decode(out, true) else { return };
-        // A token may end inside a multi-byte character: wait for the rest of it.
-        if text.ends_with('\u{FFFD}') || !text.starts_with(&self.sent) || text.len() == self.sent.len() {
+        if out.len() <= self.done {
             return;
         }
-        f(&text[self.sent.len()..]);
-        self.sent = text;
+        let (Ok(known), Ok(text)) = (tok.decode(&out[self.context..self.done], true), tok.decode(&out[self.context..], true))
+        else {
+            return;
+        };
+        // A token may end inside a multi-byte character: wait for the rest of it.
+        if text.ends_with('\u{FFFD}') || !text.starts_with(&known) || text.len() == known.len() {
+            return;
+        }
+        let piece = &text[known.len()..];
+        f(piece);
+        self.sent.push_str(piece);
+        (self.context, self.done) = (self.done, out.len());
     }
 
     fn finish(&mut self, text: &str, on_text: &mut Option<&mut dyn FnMut(&str)>) {
