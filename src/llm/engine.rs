@@ -234,9 +234,16 @@ impl Engine {
 
     /// Runs `tokens` after the cache, keeping `cached` in step with the model.
     fn forward(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
-        let logits = self.model.forward(tokens)?;
-        self.cached.extend_from_slice(tokens);
+        let mut logits = Vec::new();
+        self.forward_into(tokens, &mut logits)?;
         Ok(logits)
+    }
+
+    /// As [`Engine::forward`], into a buffer the caller keeps.
+    fn forward_into(&mut self, tokens: &[u32], logits: &mut Vec<f32>) -> Result<()> {
+        self.model.forward_into(tokens, logits)?;
+        self.cached.extend_from_slice(tokens);
+        Ok(())
     }
 
     /// Cuts the cache back to the longest common prefix with `prompt` and prefills the rest;
@@ -404,7 +411,7 @@ impl Engine {
             }
             if !pending.is_empty() {
                 let t = Instant::now();
-                logits = self.forward(&pending)?;
+                self.forward_into(&pending, &mut logits)?;
                 if pending_forced > 0 {
                     timings.forced_forward_ms += ms(t);
                 } else {
