@@ -269,6 +269,8 @@ fn batched_forced_tokens_give_the_one_at_a_time_output() {
             let (want, forced) = one_token_at_a_time(&path, &prompt, &lark);
             assert_eq!(g.tokens, want, "{text}: {:?}", g.text);
             assert_eq!(g.forced_tokens, forced, "{text}");
+            // The decode speed counts every output token; the chosen-token rate leaves the forced out.
+            assert!(g.output_tok_per_s() > g.decode_tok_per_s(), "{text}");
             assert!(forced > 0, "the kitchen grammar forces tokens ({text})");
             // The parts of the decode time are within it.
             let t = &g.timings;

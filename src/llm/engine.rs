@@ -99,9 +99,17 @@ impl Generation {
         per_second(self.prompt_tokens - self.reused_tokens.min(self.prompt_tokens), self.timings.prefill_ms)
     }
 
-    /// Tokens the model chose per second of decoding (forced tokens excluded).
+    /// Tokens the model chose per second of decoding (forced tokens excluded, though the time to run
+    /// them is in): not a speed to compare with unconstrained decoding; see
+    /// [`Generation::output_tok_per_s`].
     pub fn decode_tok_per_s(&self) -> f64 {
         per_second(self.tokens.len().saturating_sub(self.forced_tokens), self.timings.decode_ms)
+    }
+
+    /// All generated tokens (forced ones included) per second of decoding: the decode speed, with or
+    /// without a grammar.
+    pub fn output_tok_per_s(&self) -> f64 {
+        per_second(self.tokens.len(), self.timings.decode_ms)
     }
 }
 
