@@ -10,9 +10,10 @@ use serde::{Deserialize, Serialize};
 use super::{LlmError, Result};
 
 /// How the next token is chosen.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub enum Sampling {
     /// The most likely token (deterministic; the default).
+    #[default]
     Greedy,
     /// Draw from the distribution at `temperature`, restricted to the `top_p` nucleus, with a
     /// seeded generator: the same seed gives the same output.
@@ -34,12 +35,6 @@ impl Sampling {
             }
         }
         Ok(())
-    }
-}
-
-impl Default for Sampling {
-    fn default() -> Self {
-        Sampling::Greedy
     }
 }
 
