@@ -8,6 +8,8 @@ use step::action::{ObjRef, Verb};
 use step::grammar::{parse_actions, ActionGrammar, VerbSpec};
 use step::llm::chat::Message;
 use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
+use step::llm::gguf::GgufFile;
+use step::llm::model::{argmax, Transformer};
 use step::llm::sample::Sampling;
 use step::llm::tiny::{write_tiny_gguf, TinySpec};
 use step::llm::LlmError;
@@ -214,5 +216,99 @@ fn scoring_a_list_shares_work_but_gives_each_line_its_own_score() {
         // An empty continuation is an error that says what to do.
         let err = together.score(&prompt, &[String::new()]).unwrap_err().to_string();
         assert!(err.contains("empty"), "{err}");
+    }
+}
+
+/// The decode loop as first written, every token through its own forward pass (forced ones too):
+/// the output and forced count the engine, which runs a chosen token and the tokens forced after it
+/// in one pass, must reproduce.
+fn one_token_at_a_time(path: &std::path::Path, prompt: &Prompt, lark: &str) -> (Vec<u32>, usize) {
+    let e = Engine::load(path).unwrap();
+    let ids = e.tokenizer().encode(&e.render(prompt).unwrap()).unwrap();
+    let mut model = Transformer::load(&GgufFile::open(path).unwrap()).unwrap();
+    let mut c = e.grammars().compile(lark).unwrap();
+    let mut logits = model.forward(&ids).unwrap();
+    let (mut out, mut forced) = (Vec::new(), 0);
+    loop {
+        let ff = c.forced_tokens().unwrap();
+        forced += ff.len();
+        out.extend_from_slice(&ff);
+        if c.is_finished() {
+            break;
+        }
+        for &t in &ff {
+            logits = model.forward(&[t]).unwrap();
+        }
+        c.apply_mask(&mut logits).unwrap();
+        let t = argmax(&logits).unwrap();
+        if e.tokenizer().is_eos(t) {
+            break;
+        }
+        c.commit(t).unwrap();
+        out.push(t);
+        if c.is_finished() {
+            break;
+        }
+        logits = model.forward(&[t]).unwrap();
+    }
+    (out, forced)
+}
+
+#[test]
+fn batched_forced_tokens_give_the_one_at_a_time_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let lark = kitchen_grammar();
+    for spec in [TinySpec::llama(), TinySpec::qwen2(), TinySpec::llama().with_seed(9), TinySpec::qwen2().with_seed(4)] {
+        let path = tiny(spec, &dir);
+        let mut e = Engine::load(&path).unwrap();
+        for text in ["put the apple in the fridge", "open the fridge", "stand up"] {
+            let prompt = chat(text);
+            let opts = GenOptions { max_tokens: 200, ..Default::default() };
+            let g = e.generate(&prompt, Some(&lark), &opts).unwrap();
+            assert_ne!(g.stop, StopReason::MaxTokens, "{:?}", g.text);
+            let (want, forced) = one_token_at_a_time(&path, &prompt, &lark);
+            assert_eq!(g.tokens, want, "{text}: {:?}", g.text);
+            assert_eq!(g.forced_tokens, forced, "{text}");
+            // The decode speed counts every output token; the chosen-token rate leaves the forced out.
+            assert!(g.output_tok_per_s() > g.decode_tok_per_s(), "{text}");
+            assert!(forced > 0, "the kitchen grammar forces tokens ({text})");
+            // The parts of the decode time are within it.
+            let t = &g.timings;
+            let parts = t.forward_ms
+                + t.forced_forward_ms
+                + t.mask_us.iter().sum::<f64>() / 1e3
+                + t.grammar_ms
+                + t.sample_ms
+                + t.stream_ms;
+            assert!(parts <= t.decode_ms + 1e-6, "{parts} ms of parts in {} ms", t.decode_ms);
+            assert!(t.forced_forward_ms > 0.0 && t.mask_us.len() == g.tokens.len() - forced + (g.stop == StopReason::Eos) as usize);
+        }
+    }
+}
+
+#[test]
+fn streamed_pieces_concatenate_to_the_final_text() {
+    let dir = tempfile::tempdir().unwrap();
+    let lark = kitchen_grammar();
+    for spec in [TinySpec::llama().with_seed(6), TinySpec::qwen2().with_seed(8)] {
+        let mut e = Engine::load(&tiny(spec, &dir)).unwrap();
+        for grammar in [None, Some(lark.as_str())] {
+            for seed in 0..6 {
+                // Unconstrained random-weight models write arbitrary bytes: split characters included.
+                let sampling =
+                    if seed == 0 { Sampling::Greedy } else { Sampling::Sample { temperature: 1.2, top_p: 1.0, seed } };
+                let opts = GenOptions { max_tokens: 80, sampling, reuse_prefix: true };
+                let mut pieces: Vec<String> = Vec::new();
+                let mut on_text = |p: &str| pieces.push(p.to_string());
+                let g = e
+                    .generate_streaming(&chat("tidy the kitchen"), grammar, &opts, Some(&mut on_text as &mut dyn FnMut(&str)))
+                    .unwrap();
+                assert_eq!(pieces.concat(), g.text, "seed {seed}, grammar {}", grammar.is_some());
+                assert!(pieces.iter().all(|p| !p.is_empty()));
+                if grammar.is_some() {
+                    assert!(pieces.len() > 1, "pieces come as the text grows: {pieces:?}");
+                }
+            }
+        }
     }
 }

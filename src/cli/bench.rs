@@ -5,7 +5,7 @@ use std::process::{Child, Command, Stdio};
 
 use clap::{Args, Subcommand};
 
-use crate::bench::{burn, run_llm_bench, LlmBenchConfig, LlmBenchReport};
+use crate::bench::{burn, run_llm_bench, LlmBenchConfig, LlmBenchReport, TokenTime};
 use crate::llm::engine::Engine;
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
 
@@ -184,13 +184,23 @@ fn spawn_neighbours() -> anyhow::Result<Vec<Child>> {
         .collect()
 }
 
+/// One line of where a token's decode time goes.
+fn parts(t: &TokenTime) -> String {
+    format!(
+        "{:.0} = forward {:.0} + forced {:.0} + mask {:.1} + grammar {:.1} + sample {:.1} + stream {:.1} + other {:.1}",
+        t.total, t.forward, t.forced_forward, t.mask, t.grammar, t.sample, t.stream, t.other
+    )
+}
+
 fn table(r: &LlmBenchReport) -> String {
     format!(
         "model {} ({} threads, {} kernels, median of {})\n\
          load                 {:>9.1} ms\n\
          prefill ({:>3} tok)    {:>9.1} tok/s\n\
          decode               {:>9.1} tok/s\n\
-         decode, constrained  {:>9.1} tok/s out ({:.1} chosen/s, {:.0}% forced; {:+.1}% per token)\n\
+         decode, constrained  {:>9.1} tok/s out ({:.2}x plain per output token; {:.0}% forced, {:.1} chosen/s)\n\
+         µs per token, plain  {}\n\
+         µs per token, constr {}\n\
          mask per token       {:>9.1} µs p50, {:.1} µs p99 ({:.2}% of decode time)\n\
          grammar compile      {:>9.1} ms\n\
          peak RSS             {:>9.1} MB",
@@ -203,9 +213,11 @@ fn table(r: &LlmBenchReport) -> String {
         r.prefill_tok_per_s,
         r.decode_tok_per_s,
         r.constrained_output_tok_per_s,
-        r.constrained_decode_tok_per_s,
+        r.constrained_speed_ratio,
         r.forced_token_share * 100.0,
-        r.constrained_overhead_pct,
+        r.constrained_decode_tok_per_s,
+        parts(&r.plain_us_per_token),
+        parts(&r.constrained_us_per_token),
         r.mask_us_p50,
         r.mask_us_p99,
         r.mask_share_pct,

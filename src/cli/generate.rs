@@ -139,6 +139,7 @@ pub fn run(args: &GenerateArgs) -> anyhow::Result<()> {
             "grammar_compile_ms": g.timings.grammar_compile_ms,
             "prefill_tok_per_s": g.prefill_tok_per_s(),
             "decode_tok_per_s": g.decode_tok_per_s(),
+            "output_tok_per_s": g.output_tok_per_s(),
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());

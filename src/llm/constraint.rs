@@ -13,8 +13,7 @@
 //!     if c.is_finished() { break }                 // nothing can follow: stop (EOS is implied)
 //!     let ff = c.forced_tokens()?;                 // already committed: append, prefill in one pass
 //!     if !ff.is_empty() { append(ff); continue }
-//!     let mask = c.mask()?;                        // EOS is in it only where the grammar can end
-//!     mask.apply_to_logits(&mut logits)?;
+//!     c.apply_mask(&mut logits)?;                  // EOS is allowed only where the grammar can end
 //!     let t = sample(&logits);
 //!     if eos.contains(&t) { break }                // (committing it is allowed but not needed)
 //!     c.commit(t)?;
@@ -83,10 +82,9 @@ impl TokenMask {
                 u32::MAX => {}
                 0 => chunk.fill(f32::NEG_INFINITY),
                 w => {
+                    // A select rather than a branch per bit: the compiler vectorises it.
                     for (bit, x) in chunk.iter_mut().enumerate() {
-                        if (w >> bit) & 1 == 0 {
-                            *x = f32::NEG_INFINITY;
-                        }
+                        *x = if (w >> bit) & 1 != 0 { *x } else { f32::NEG_INFINITY };
                     }
                 }
             }
@@ -417,25 +415,34 @@ impl Constraint {
     /// The tokens allowed at the next position. EOS ids are in it only where the grammar can end;
     /// once [`Self::is_finished`], only EOS is. A position where nothing is allowed is an error.
     pub fn mask(&mut self) -> Result<TokenMask> {
-        if let Some(m) = &self.mask {
-            return Ok(m.clone());
-        }
-        let vob = if self.is_finished() {
-            let mut v = SimpleVob::alloc(self.n_vocab);
-            for &e in &self.eos {
-                v.allow_token(e);
+        self.current_mask().cloned()
+    }
+
+    /// Applies [`Self::mask`] to `logits` (see [`TokenMask::apply_to_logits`]): the decode loop's
+    /// call, which borrows the mask kept for [`Self::commit`] instead of copying it every token.
+    pub fn apply_mask(&mut self, logits: &mut [f32]) -> Result<()> {
+        self.current_mask()?.apply_to_logits(logits)
+    }
+
+    /// The mask of the current position, computed once per position.
+    fn current_mask(&mut self) -> Result<&TokenMask> {
+        if self.mask.is_none() {
+            let vob = if self.is_finished() {
+                let mut v = SimpleVob::alloc(self.n_vocab);
+                for &e in &self.eos {
+                    v.allow_token(e);
+                }
+                v
+            } else {
+                self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
+            };
+            if vob.is_zero() {
+                // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
+                return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
             }
-            v
-        } else {
-            self.matcher.compute_mask().map_err(|e| self.error("no token can continue the text", e))?
-        };
-        if vob.is_zero() {
-            // compute_mask reports this itself; kept so an empty mask can never reach the sampler.
-            return Err(LlmError::Decode(format!("no token can continue the text {:?}", self.text_tail())));
+            self.mask = Some(TokenMask { vob });
         }
-        let m = TokenMask { vob };
-        self.mask = Some(m.clone());
-        Ok(m)
+        self.mask.as_ref().ok_or_else(|| LlmError::Decode("the token mask was not computed".into()))
     }
 
     /// Advances past `token`, which must be in the current mask. After the grammar has finished,
@@ -453,10 +460,7 @@ impl Constraint {
                 self.token_dbg(token)
             )));
         }
-        if self.mask.is_none() {
-            self.mask()?;
-        }
-        if !self.mask.as_ref().is_some_and(|m| m.is_allowed(token)) {
+        if !self.current_mask()?.is_allowed(token) {
             return Err(LlmError::Decode(format!(
                 "token {token} {} is not allowed by the grammar after {:?}",
                 self.token_dbg(token),

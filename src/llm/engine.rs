@@ -62,9 +62,21 @@ pub enum StopReason {
 pub struct Timings {
     pub prefill_ms: f64,
     pub decode_ms: f64,
-    /// Time spent computing each token mask, in microseconds, one entry per sampled token.
+    /// Time spent computing each token mask and applying it to the logits, in microseconds, one
+    /// entry per sampled token.
     pub mask_us: Vec<f64>,
     pub grammar_compile_ms: f64,
+    /// The parts of `decode_ms`, so a slow decode can be told apart without a profiler:
+    /// forward passes of one chosen token,
+    pub forward_ms: f64,
+    /// forward passes of grammar-forced tokens (with the chosen token before them, if any),
+    pub forced_forward_ms: f64,
+    /// grammar work besides the masks (finding forced tokens, committing chosen ones),
+    pub grammar_ms: f64,
+    /// choosing tokens from the logits,
+    pub sample_ms: f64,
+    /// and decoding text for the streaming callback. The rest of `decode_ms` is loop overhead.
+    pub stream_ms: f64,
 }
 
 /// One generation's result.
@@ -87,9 +99,17 @@ impl Generation {
         per_second(self.prompt_tokens - self.reused_tokens.min(self.prompt_tokens), self.timings.prefill_ms)
     }
 
-    /// Tokens the model chose per second of decoding (forced tokens excluded).
+    /// Tokens the model chose per second of decoding (forced tokens excluded, though the time to run
+    /// them is in): not a speed to compare with unconstrained decoding; see
+    /// [`Generation::output_tok_per_s`].
     pub fn decode_tok_per_s(&self) -> f64 {
         per_second(self.tokens.len().saturating_sub(self.forced_tokens), self.timings.decode_ms)
+    }
+
+    /// All generated tokens (forced ones included) per second of decoding: the decode speed, with or
+    /// without a grammar.
+    pub fn output_tok_per_s(&self) -> f64 {
+        per_second(self.tokens.len(), self.timings.decode_ms)
     }
 }
 
@@ -222,9 +242,16 @@ impl Engine {
 
     /// Runs `tokens` after the cache, keeping `cached` in step with the model.
     fn forward(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
-        let logits = self.model.forward(tokens)?;
-        self.cached.extend_from_slice(tokens);
+        let mut logits = Vec::new();
+        self.forward_into(tokens, &mut logits)?;
         Ok(logits)
+    }
+
+    /// As [`Engine::forward`], into a buffer the caller keeps.
+    fn forward_into(&mut self, tokens: &[u32], logits: &mut Vec<f32>) -> Result<()> {
+        self.model.forward_into(tokens, logits)?;
+        self.cached.extend_from_slice(tokens);
+        Ok(())
     }
 
     /// Cuts the cache back to the longest common prefix with `prompt` and prefills the rest;
@@ -355,24 +382,31 @@ impl Engine {
         let mut out: Vec<u32> = Vec::new();
         let mut forced_count = 0;
         let mut stream = Stream::default();
+        // Tokens in the output but not yet run: the chosen token, then the tokens the grammar forces
+        // after it. One forward pass runs them all (cheaper than one pass each, and the kernels give
+        // the same bits either way); nothing runs after the last output token.
+        let mut pending: Vec<u32> = Vec::new();
+        let mut pending_forced = 0;
         let stop = loop {
             if let Some(c) = constraint.as_mut() {
-                // Fast-forward: tokens the grammar forces are appended and run in one pass.
+                let t = Instant::now();
                 let forced = c.forced_tokens()?;
+                timings.grammar_ms += ms(t);
                 forced_count += forced.len();
+                pending_forced += forced.len();
                 out.extend_from_slice(&forced);
+                pending.extend_from_slice(&forced);
                 if !forced.is_empty() {
+                    let t = Instant::now();
                     stream.push(&self.tokenizer, &out, &mut on_text);
+                    timings.stream_ms += ms(t);
                 }
                 if c.is_finished() {
                     break StopReason::GrammarComplete;
                 }
-                if !forced.is_empty() {
-                    if self.cached.len() + forced.len() > context {
-                        break StopReason::Context;
-                    }
-                    logits = self.forward(&forced)?;
-                }
+            }
+            if self.cached.len() + pending.len() > context {
+                break StopReason::Context;
             }
             if out.len() >= opts.max_tokens {
                 if let Some(c) = constraint.as_mut() {
@@ -383,21 +417,37 @@ impl Engine {
                 }
                 break StopReason::MaxTokens;
             }
+            if !pending.is_empty() {
+                let t = Instant::now();
+                self.forward_into(&pending, &mut logits)?;
+                if pending_forced > 0 {
+                    timings.forced_forward_ms += ms(t);
+                } else {
+                    timings.forward_ms += ms(t);
+                }
+                pending.clear();
+                pending_forced = 0;
+            }
             if let Some(c) = constraint.as_mut() {
                 let t = Instant::now();
-                let mask = c.mask()?;
-                mask.apply_to_logits(&mut logits)?;
+                c.apply_mask(&mut logits)?;
                 timings.mask_us.push(t.elapsed().as_secs_f64() * 1e6);
             }
+            let t = Instant::now();
             let tok = sampler.choose(&logits)?;
+            timings.sample_ms += ms(t);
             if self.tokenizer.is_eos(tok) {
                 break StopReason::Eos;
             }
             if let Some(c) = constraint.as_mut() {
+                let t = Instant::now();
                 c.commit(tok)?;
+                timings.grammar_ms += ms(t);
             }
             out.push(tok);
+            let t = Instant::now();
             stream.push(&self.tokenizer, &out, &mut on_text);
+            timings.stream_ms += ms(t);
             if constraint.as_ref().is_some_and(|c| c.is_finished()) {
                 break StopReason::GrammarComplete;
             }
@@ -405,7 +455,7 @@ impl Engine {
             if self.cached.len() + 1 > context {
                 break StopReason::Context;
             }
-            logits = self.forward(&[tok])?;
+            pending.push(tok);
         };
         timings.decode_ms = ms(t_decode);
         let text = self.tokenizer.decode(&out, true)?;
@@ -422,23 +472,36 @@ impl Engine {
     }
 }
 
-/// What has been streamed so far. The text of the tokens so far is decoded whole each time (outputs
-/// are short) and only a grown, character-complete prefix is passed on.
+/// What has been streamed so far. Each push decodes only the tokens after the last piece passed on,
+/// with the one piece before them as context (a tokenizer may decode a text's first token
+/// differently, e.g. without its leading space), so the cost per token stays flat however long the
+/// output grows. Only a grown, character-complete text is passed on.
 #[derive(Default)]
 struct Stream {
     sent: String,
+    /// `out[..done]` has been passed on; `out[context..done]` is the last piece's tokens.
+    done: usize,
+    context: usize,
 }
 
 impl Stream {
     fn push(&mut self, tok: &GgufTokenizer, out: &[u32], on_text: &mut Option<&mut dyn FnMut(&str)>) {
         let Some(f) = on_text.as_mut() else { return };
-        let Ok(text) = tok.decode(out, true) else { return };
-        // A token may end inside a multi-byte character: wait for the rest of it.
-        if text.ends_with('\u{FFFD}') || !text.starts_with(&self.sent) || text.len() == self.sent.len() {
+        if out.len() <= self.done {
             return;
         }
-        f(&text[self.sent.len()..]);
-        self.sent = text;
+        let (Ok(known), Ok(text)) = (tok.decode(&out[self.context..self.done], true), tok.decode(&out[self.context..], true))
+        else {
+            return;
+        };
+        // A token may end inside a multi-byte character: wait for the rest of it.
+        if text.ends_with('\u{FFFD}') || !text.starts_with(&known) || text.len() == known.len() {
+            return;
+        }
+        let piece = &text[known.len()..];
+        f(piece);
+        self.sent.push_str(piece);
+        (self.context, self.done) = (self.done, out.len());
     }
 
     fn finish(&mut self, text: &str, on_text: &mut Option<&mut dyn FnMut(&str)>) {

@@ -240,16 +240,26 @@ impl Transformer {
     /// Runs `tokens` at positions `cached_len()..`, appends them to the cache and returns the
     /// next-token logits after the last one (length `n_vocab`).
     pub fn forward(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
-        self.forward_rows(tokens, false)
+        let mut logits = Vec::new();
+        self.forward_rows(tokens, false, &mut logits)?;
+        Ok(logits)
+    }
+
+    /// As [`Transformer::forward`], into `logits` (resized to `n_vocab`): the decode loop keeps one
+    /// buffer rather than allocating a vocabulary's width of floats per token.
+    pub fn forward_into(&mut self, tokens: &[u32], logits: &mut Vec<f32>) -> Result<()> {
+        self.forward_rows(tokens, false, logits)
     }
 
     /// As [`Transformer::forward`], returning the next-token logits after every one of `tokens`
     /// (`tokens.len() × n_vocab`, row by row): what scoring a continuation needs.
     pub fn forward_all(&mut self, tokens: &[u32]) -> Result<Vec<f32>> {
-        self.forward_rows(tokens, true)
+        let mut logits = Vec::new();
+        self.forward_rows(tokens, true, &mut logits)?;
+        Ok(logits)
     }
 
-    fn forward_rows(&mut self, tokens: &[u32], all: bool) -> Result<Vec<f32>> {
+    fn forward_rows(&mut self, tokens: &[u32], all: bool, logits: &mut Vec<f32>) -> Result<()> {
         let t = tokens.len();
         if t == 0 {
             return Err(LlmError::Decode("forward called with no tokens".into()));
@@ -298,10 +308,11 @@ impl Transformer {
         let rows = if all { t } else { 1 };
         let h = fit(&mut h_buf, rows * d);
         rms_norm(&x[(t - rows) * d..], &self.out_norm, eps, h);
-        let mut logits = vec![0f32; rows * cfg.n_vocab];
-        matmul(&self.output, h, rows, &mut s.q8, &mut logits);
+        logits.clear();
+        logits.resize(rows * cfg.n_vocab, 0.0);
+        matmul(&self.output, h, rows, &mut s.q8, logits);
         (s.x, s.h) = (x_buf, h_buf);
-        Ok(logits)
+        Ok(())
     }
 }
 

@@ -10,9 +10,10 @@ use serde::{Deserialize, Serialize};
 use super::{LlmError, Result};
 
 /// How the next token is chosen.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub enum Sampling {
     /// The most likely token (deterministic; the default).
+    #[default]
     Greedy,
     /// Draw from the distribution at `temperature`, restricted to the `top_p` nucleus, with a
     /// seeded generator: the same seed gives the same output.
@@ -37,37 +38,95 @@ impl Sampling {
     }
 }
 
-impl Default for Sampling {
-    fn default() -> Self {
-        Sampling::Greedy
-    }
-}
-
 /// A stateful chooser for one generation.
 pub struct Sampler {
-    inner: LogitsProcessor,
+    /// `None` for greedy: the argmax is taken on the logits in place, without copying them into a
+    /// tensor every token (the same choice: the first of equal maxima).
+    inner: Option<LogitsProcessor>,
 }
 
 impl Sampler {
     pub fn new(sampling: &Sampling) -> Self {
-        let (seed, s) = match *sampling {
-            Sampling::Greedy => (0, CandleSampling::ArgMax),
+        let inner = match *sampling {
+            Sampling::Greedy => None,
             // Parameters are checked by `Sampling::validate` (the engine calls it); 0 is greedy.
             Sampling::Sample { temperature, top_p, seed } if temperature > 0.0 => {
-                if top_p < 1.0 {
-                    (seed, CandleSampling::TopP { p: top_p, temperature })
+                let s = if top_p < 1.0 {
+                    CandleSampling::TopP { p: top_p, temperature }
                 } else {
-                    (seed, CandleSampling::All { temperature })
-                }
+                    CandleSampling::All { temperature }
+                };
+                Some(LogitsProcessor::from_sampling(seed, s))
             }
-            Sampling::Sample { seed, .. } => (seed, CandleSampling::ArgMax),
+            Sampling::Sample { .. } => None,
         };
-        Self { inner: LogitsProcessor::from_sampling(seed, s) }
+        Self { inner }
     }
 
     /// Picks a token id from `logits` (length = vocabulary).
     pub fn choose(&mut self, logits: &[f32]) -> Result<u32> {
-        let t = Tensor::new(logits, &Device::Cpu)?;
-        Ok(self.inner.sample(&t)?)
+        match &mut self.inner {
+            None => argmax(logits).ok_or_else(|| LlmError::Sampling("no logit to choose from (all are NaN)".into())),
+            Some(p) => Ok(p.sample(&Tensor::new(logits, &Device::Cpu)?)?),
+        }
+    }
+}
+
+/// Index of the largest logit, the first of equal maxima, NaNs skipped (as
+/// [`super::model::argmax`]). Two passes, the first in lanes the compiler can vectorise: a
+/// 152k-entry vocabulary every token is worth it.
+pub fn argmax(logits: &[f32]) -> Option<u32> {
+    const LANES: usize = 16;
+    let mut lanes = [f32::NEG_INFINITY; LANES];
+    let chunks = logits.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for (m, &x) in lanes.iter_mut().zip(c) {
+            // `x > m` is false for NaN, so NaNs never win.
+            *m = if x > *m { x } else { *m };
+        }
+    }
+    let max = tail.iter().chain(&lanes).fold(f32::NEG_INFINITY, |m, &x| if x > m { x } else { m });
+    logits.iter().position(|&x| x == max).map(|i| i as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn argmax_agrees_with_the_plain_loop() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 40) as u32
+        };
+        for n in [1usize, 5, 16, 17, 100, 1000] {
+            for _ in 0..50 {
+                // Few distinct values, so ties are common; some NaN and infinities.
+                let v: Vec<f32> = (0..n)
+                    .map(|_| match next() % 10 {
+                        0 => f32::NAN,
+                        1 => f32::NEG_INFINITY,
+                        2 => f32::INFINITY,
+                        k => k as f32 - 5.0,
+                    })
+                    .collect();
+                assert_eq!(argmax(&v), crate::llm::model::argmax(&v), "{v:?}");
+            }
+        }
+        assert_eq!(argmax(&[]), None);
+        assert_eq!(argmax(&[f32::NAN, f32::NAN]), None);
+        assert_eq!(argmax(&[f32::NEG_INFINITY, f32::NAN, f32::NEG_INFINITY]), Some(0));
+        assert_eq!(argmax(&[f32::NAN, f32::NEG_INFINITY]), Some(1));
+    }
+
+    #[test]
+    fn greedy_takes_the_first_maximum() {
+        let mut s = Sampler::new(&Sampling::Greedy);
+        assert_eq!(s.choose(&[0.0, 2.0, 1.0, 2.0]).unwrap(), 1);
+        let mut z = Sampler::new(&Sampling::Sample { temperature: 0.0, top_p: 1.0, seed: 3 });
+        assert_eq!(z.choose(&[0.0, 2.0, 1.0, 2.0]).unwrap(), 1);
+        assert!(s.choose(&[f32::NAN]).is_err());
     }
 }
