@@ -38,17 +38,28 @@ pub fn parse_plan_format(s: &str) -> Result<PlanFormat, String> {
 /// Knobs of the commands that run inference (`generate`, `bench llm`).
 #[derive(Args, Debug, Clone, Default)]
 pub struct InferenceArgs {
-    /// CPU threads for inference (default: the machine's cores; more than the machine has is capped,
-    /// with a warning). Read once, before the model loads.
-    #[arg(long, value_parser = parse_threads, value_name = "N")]
-    pub threads: Option<u64>,
+    /// CPU threads for inference: a count (more than the machine has is capped, with a warning), or
+    /// `auto`, the default: the cores not busy with other processes when the model starts (at least
+    /// one). `STEP_THREADS` in the environment is used when this is not given.
+    #[arg(long, value_parser = parse_threads, value_name = "N|auto")]
+    pub threads: Option<Threads>,
 }
 
-fn parse_threads(s: &str) -> Result<u64, String> {
+/// `--threads`: a count, or `auto`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Threads {
+    Auto,
+    Count(u64),
+}
+
+fn parse_threads(s: &str) -> Result<Threads, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(Threads::Auto);
+    }
     match s.parse::<u64>() {
-        Ok(0) => Err("at least 1 thread is needed (omit --threads to use every core)".into()),
-        Ok(n) => Ok(n),
-        Err(_) => Err(format!("'{s}' is not a whole number of threads")),
+        Ok(0) => Err("at least 1 thread is needed (or `auto`: the cores not already busy)".into()),
+        Ok(n) => Ok(Threads::Count(n)),
+        Err(_) => Err(format!("'{s}' is not a whole number of threads, nor `auto`")),
     }
 }
 
@@ -56,7 +67,15 @@ impl InferenceArgs {
     /// Sizes candle's worker pool. candle reads these variables the first time it is used, so this
     /// runs before any model is loaded.
     pub fn apply(&self) {
-        let Some(asked) = self.threads else { return };
+        let asked = match self.threads {
+            None => return,
+            Some(Threads::Auto) => {
+                // Counted when the pool starts (after a bench's neighbours are running), not now.
+                std::env::set_var("STEP_THREADS", "auto");
+                return;
+            }
+            Some(Threads::Count(n)) => n,
+        };
         let n = cap_threads(asked as usize, machine_threads());
         if n < asked as usize {
             eprintln!("warning: --threads {asked} is more than this machine's {n} hardware threads; using {n}");

@@ -5,7 +5,9 @@
 //! not hold up the rest: the others take its share. The caller's thread works too.
 //!
 //! The thread count comes from `STEP_THREADS`, else `CANDLE_NUM_THREADS`/`RAYON_NUM_THREADS` (what
-//! `step --threads N` sets), else the machine's available parallelism.
+//! `step --threads N` sets); `auto`, or none of them, means the cores not already busy when the pool
+//! starts ([`auto_threads`]): on a 2-core robot PC with one busy neighbour, one worker gets a core to
+//! itself instead of two taking turns with the neighbour.
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, OnceLock};
@@ -162,13 +164,35 @@ fn worker(s: &Shared) {
     }
 }
 
-/// The thread count asked for in the environment, else the machine's parallelism.
+/// The thread count asked for in the environment (the first of the variables that is set); `auto`,
+/// anything that is not a positive count, or nothing set: [`auto_threads`].
 pub fn configured_threads() -> usize {
-    ["STEP_THREADS", "CANDLE_NUM_THREADS", "RAYON_NUM_THREADS"]
-        .iter()
-        .find_map(|k| std::env::var(k).ok().and_then(|v| v.trim().parse::<usize>().ok()))
-        .filter(|&n| n > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+    let asked = ["STEP_THREADS", "CANDLE_NUM_THREADS", "RAYON_NUM_THREADS"].iter().find_map(|k| std::env::var(k).ok());
+    match asked.and_then(|v| v.trim().parse::<usize>().ok()) {
+        Some(n) if n > 0 => n,
+        _ => auto_threads(),
+    }
+}
+
+/// The hardware threads not already busy: the machine's parallelism less the other runnable
+/// threads at this moment (Linux's `procs_running`, which counts the caller), at least 1; the whole
+/// machine where `/proc/stat` cannot be read. Read once, when the pool starts.
+pub fn auto_threads() -> usize {
+    let machine = std::thread::available_parallelism().map_or(1, |n| n.get());
+    match std::fs::read_to_string("/proc/stat") {
+        Ok(stat) => free_threads(machine, &stat),
+        Err(_) => machine,
+    }
+}
+
+/// [`auto_threads`] over the text of `/proc/stat`.
+fn free_threads(machine: usize, proc_stat: &str) -> usize {
+    let running = proc_stat.lines().find_map(|l| l.strip_prefix("procs_running")?.trim().parse::<usize>().ok());
+    match running {
+        // The caller is running too: the others are `running - 1`.
+        Some(r) => machine.saturating_sub(r.saturating_sub(1)).max(1),
+        None => machine,
+    }
 }
 
 /// The process-wide pool, created on first use with [`configured_threads`].
@@ -193,6 +217,17 @@ mod tests {
             }
             assert!(hits.iter().all(|h| h.load(Ordering::Relaxed) == 50), "n = {n}");
         }
+    }
+
+    #[test]
+    fn auto_takes_the_cores_other_runnable_threads_leave() {
+        let stat = |r: usize| format!("cpu  1 2 3\nctxt 99\nprocs_running {r}\nprocs_blocked 0\n");
+        assert_eq!(free_threads(2, &stat(1)), 2, "only the caller runs");
+        assert_eq!(free_threads(2, &stat(2)), 1, "one busy neighbour");
+        assert_eq!(free_threads(2, &stat(5)), 1, "never fewer than one");
+        assert_eq!(free_threads(8, &stat(3)), 6);
+        assert_eq!(free_threads(4, "cpu 1 2 3\n"), 4, "no procs_running line: the whole machine");
+        assert!(auto_threads() >= 1);
     }
 
     #[test]
