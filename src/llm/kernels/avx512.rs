@@ -13,7 +13,10 @@
 //!   Two tokens share one 512-bit register (one token per 256-bit half), so each instruction does the
 //!   work of two tokens while each token's lanes keep their own order.
 //!
-//! Q6_K (a scale per 16 values inside the lane sums) is left to the AVX2 kernel.
+//! Q6_K has a scale per 16 values inside the lane sums: its pair kernel multiplies bytes to 16-bit
+//! pairs (`vpmaddubsw`, never saturating for these ranges) and lets `vpdpwssd` apply the scales while
+//! summing into the lanes, starting at `-128 · sc · Σ w`. Its decoding (one token) is left to the
+//! AVX2 kernel: with the scale multiply a VNNI version needs as many instructions per block.
 
 use super::{Format, PairBlock, Q8Block};
 
@@ -33,7 +36,7 @@ pub fn available() -> bool {
     }
 }
 
-/// Whether these kernels handle `fmt` (else the caller uses the AVX2 ones).
+/// Whether [`dot`] handles `fmt` (else the caller uses the AVX2 kernel); [`dot_pairs`] handles all.
 pub fn handles(fmt: Format) -> bool {
     fmt != Format::Q6K
 }
@@ -80,7 +83,7 @@ pub unsafe fn dot<const NR: usize, const NT: usize>(
 /// minimum terms). Returns each pair's two results.
 ///
 /// # Safety
-/// As [`dot`]; every `p[j]` the same number of blocks as `w` holds, `s` as many rows of `stride`
+/// [`available`]; each `w` must hold `p[j].len()` 32-blocks of `fmt`, every `p[j]` the same number of blocks as `w` holds, `s` as many rows of `stride`
 /// (the last row needs only `2 · NP` values). At most 8 pairs.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,f16c,avx512f,avx512bw,avx512vl,avx512vnni")]
@@ -92,7 +95,7 @@ pub unsafe fn dot_pairs<const NP: usize>(
     stride: usize,
 ) -> [[f32; 2]; NP] {
     use std::arch::x86_64::*;
-    debug_assert!(handles(fmt) && NP <= 8);
+    debug_assert!(NP <= 8);
     debug_assert!(p.iter().all(|r| r.len() == p[0].len()));
     debug_assert!(p[0].is_empty() || s.len() >= (p[0].len() - 1) * stride + 2 * NP);
     let a = x86::Sums { s, stride };
@@ -111,7 +114,7 @@ pub unsafe fn dot_pairs<const NP: usize>(
             x86::pairs::<NP, 34>(w, p, &a, |p| (_mm256_loadu_si256(p.add(2) as *const __m256i), x86::f16(p), None))
         }
         Format::Q4K => x86::q4k_pairs::<NP>(w, p, &a),
-        Format::Q6K => unreachable!("Q6_K is left to the AVX2 kernel"),
+        Format::Q6K => x86::q6k_pairs::<NP>(w, p),
     }
 }
 
@@ -290,6 +293,23 @@ mod x86 {
             }
         }
 
+        /// Adds a block with a scale per 16 values: `q` signed (element order, both halves), `sc`
+        /// the i16 scale of each 16-bit pair (one token per half), `start` each lane's
+        /// `-128 · sc · Σ q` over its four weights (the activations are a + 128).
+        #[inline(always)]
+        unsafe fn add_scaled(&mut self, q: __m512i, sc: __m512i, start: __m512i, p: &[&[PairBlock]; NP], c: usize, f: f32) {
+            let fv = _mm512_set1_ps(f);
+            for j in 0..NP {
+                let b = p[j].get_unchecked(c);
+                let av = _mm512_load_si512(b.qs.as_ptr() as *const _);
+                // (a + 128) · q pairs: at most 2 · 255 · 32 in magnitude, inside i16.
+                let pairs = _mm512_maddubs_epi16(av, q);
+                let lanes = _mm512_dpwssd_epi32(start, pairs, sc);
+                let x = _mm512_mul_ps(_mm512_cvtepi32_ps(lanes), fv);
+                self.acc[j] = _mm512_fmadd_ps(x, _mm512_load_ps(b.d.as_ptr()), self.acc[j]);
+            }
+        }
+
         #[inline(always)]
         unsafe fn finish(self) -> [[f32; 2]; NP] {
             let mut out = [[0f32; 2]; NP];
@@ -336,6 +356,38 @@ mod x86 {
                     let j = 2 * jj + h;
                     let (sc, m) = q4k_scale_min(j, &b[4..16]);
                     st.add(q, p, a, sb * 8 + j, d * sc as f32, Some(-(dmin * m as f32)));
+                }
+            }
+        }
+        st.finish()
+    }
+
+    #[inline(always)]
+    pub unsafe fn q6k_pairs<const NP: usize>(w: &[u8], p: &[&[PairBlock]; NP]) -> [[f32; 2]; NP] {
+        let m4 = _mm256_set1_epi8(0x0f);
+        let m2 = _mm256_set1_epi8(0x03);
+        // Scale pair k's i16 lanes in each token's half: 2k in the low eight (elements 0..16 of
+        // the block), 2k + 1 in the high eight.
+        let half = _mm512_set_epi64(0x0001_0001_0001_0001, 0x0001_0001_0001_0001, 0, 0, 0x0001_0001_0001_0001, 0x0001_0001_0001_0001, 0, 0);
+        let mut st = Pairs::<NP>::new();
+        for sb in 0..p[0].len() / 8 {
+            let b = w.as_ptr().add(sb * 210);
+            let d = f16(b.add(208));
+            let scales = _mm512_cvtepi8_epi16(_mm256_zextsi128_si256(_mm_loadu_si128(b.add(192) as *const __m128i)));
+            for n in 0..2 {
+                let qh = _mm256_loadu_si256(b.add(128 + 32 * n) as *const __m256i);
+                for kk in 0..4 {
+                    let k = 4 * n + kk;
+                    let ql = _mm256_loadu_si256(b.add(64 * n + 32 * (kk & 1)) as *const __m256i);
+                    let nib = if kk < 2 { _mm256_and_si256(ql, m4) } else { _mm256_and_si256(_mm256_srli_epi16::<4>(ql), m4) };
+                    let hi = _mm256_and_si256(_mm256_srl_epi16(qh, _mm_cvtsi32_si128(2 * kk as i32)), m2);
+                    let q = _mm256_sub_epi8(_mm256_or_si256(nib, _mm256_slli_epi16::<4>(hi)), _mm256_set1_epi8(32));
+                    let qz = _mm512_broadcast_i64x4(q);
+                    let sc = _mm512_permutexvar_epi16(_mm512_add_epi16(half, _mm512_set1_epi16(2 * k as i16)), scales);
+                    // -128 · sc · Σ q per lane: 128 · (q + q') pairs (|·| ≤ 8192) times -sc (≤ 128).
+                    let q128 = _mm512_maddubs_epi16(_mm512_set1_epi8(-128), qz);
+                    let start = _mm512_dpwssd_epi32(_mm512_setzero_si512(), q128, _mm512_sub_epi16(_mm512_setzero_si512(), sc));
+                    st.add_scaled(qz, sc, start, p, sb * 8 + k, d);
                 }
             }
         }

@@ -334,7 +334,7 @@ impl QMatrix {
                         let mut i = i0;
                         // AVX-512: pairs of tokens, 16 then 8 then 2 at a time (i0 is even, so
                         // token i starts pair i / 2).
-                        if kernel == Kernel::Avx512 && !q.pairs.is_empty() && avx512::handles(*fmt) {
+                        if kernel == Kernel::Avx512 && !q.pairs.is_empty() {
                             i = self.pairs_avx512(*fmt, w[0], q, i, end, r, y, ld);
                         }
                         // Eight (then four) tokens at a time share each decoded weight block.
