@@ -176,7 +176,25 @@ fn round_away(v: f32) -> i32 {
     }
 }
 
+/// [`quantize_block_with`] as compiled for the CPU: with AVX2 the compiler vectorises it (7% of a
+/// Qwen prompt's time as SSE2 code). The same IEEE operations in the same order, so the same bits.
 fn quantize_block(xs: &[f32]) -> Q8Block {
+    #[cfg(target_arch = "x86_64")]
+    if avx2::available() {
+        // SAFETY: the CPU has AVX2 (checked).
+        return unsafe { quantize_block_avx2(xs) };
+    }
+    quantize_block_with(xs)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn quantize_block_avx2(xs: &[f32]) -> Q8Block {
+    quantize_block_with(xs)
+}
+
+#[inline(always)]
+fn quantize_block_with(xs: &[f32]) -> Q8Block {
     let amax = xs.iter().fold(0f32, |m, x| m.max(x.abs()));
     let d = amax / 127.0;
     let id = if d > 0.0 { 1.0 / d } else { 0.0 };

@@ -290,3 +290,25 @@ fn avx512_q6k_equals_scalar_at_the_extremes() {
         assert!(want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits()), "t {t}: {want:?}\n{got:?}");
     }
 }
+
+#[test]
+fn activation_quantisation_with_avx2_equals_the_portable_code() {
+    if !avx2::available() {
+        eprintln!("skipped: this CPU has no AVX2/FMA");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(29);
+    for k in 0..2000 {
+        let mut xs = randn(&mut rng, QK);
+        // Values on the rounding halves, and all-zero blocks.
+        match k % 4 {
+            0 => xs.iter_mut().enumerate().for_each(|(e, v)| *v = (e as f32 - 15.5) * 0.5),
+            1 => xs.fill(0.0),
+            _ => {}
+        }
+        let a = quantize_block_with(&xs);
+        // SAFETY: AVX2 is present (checked above).
+        let b = unsafe { quantize_block_avx2(&xs) };
+        assert!(a.d.to_bits() == b.d.to_bits() && a.s.to_bits() == b.s.to_bits() && a.qs == b.qs, "{xs:?}");
+    }
+}
