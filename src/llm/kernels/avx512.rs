@@ -11,11 +11,15 @@
 //! - [`dot_pairs`] (prompts: one weight block serves many tokens) takes activations already offset
 //!   to `a + 128` ([`PairBlock`]) and starts each lane at `-128 · Σ w`, computed once per weight block.
 //!   Two tokens share one 512-bit register (one token per 256-bit half), so each instruction does the
-//!   work of two tokens while each token's lanes keep their own order.
+//!   work of two tokens while each token's lanes keep their own order. Two weight rows per call
+//!   share each activation load (the pair blocks are the bulk of the bytes read).
 //!
-//! Q6_K (a scale per 16 values inside the lane sums) is left to the AVX2 kernel.
+//! Q6_K has a scale per 16 values inside the lane sums: its pair kernel multiplies bytes to 16-bit
+//! pairs (`vpmaddubsw`, never saturating for these ranges) and lets `vpdpwssd` apply the scales while
+//! summing into the lanes, starting at `-128 · sc · Σ w`. Its decoding (one token) is left to the
+//! AVX2 kernel: with the scale multiply a VNNI version needs as many instructions per block.
 
-use super::{Format, PairBlock, Q8Block};
+use super::{q4k_scale_min, Format, PairBlock, Q8Block};
 
 /// Whether this CPU runs these kernels (AVX-512 F/BW/VL/VNNI, plus the AVX2 set they build on).
 pub fn available() -> bool {
@@ -33,7 +37,7 @@ pub fn available() -> bool {
     }
 }
 
-/// Whether these kernels handle `fmt` (else the caller uses the AVX2 ones).
+/// Whether [`dot`] handles `fmt` (else the caller uses the AVX2 kernel); [`dot_pairs`] handles all.
 pub fn handles(fmt: Format) -> bool {
     fmt != Format::Q6K
 }
@@ -75,43 +79,72 @@ pub unsafe fn dot<const NR: usize, const NT: usize>(
     }
 }
 
-/// `2 · NP` dot products of one weight row with `NP` token pairs (`p[j]`: the pair's blocks; `s`:
-/// the same tokens' activation sums, `s[c * stride + k]` for token `2j + k`'s block `c`, for the
-/// minimum terms). Returns each pair's two results.
+/// `NR × 2 · NP` dot products of `NR` weight rows with `NP` token pairs (`p[j]`: the pair's
+/// blocks; `s`: the same tokens' activation sums, `s[c * stride + k]` for token `2j + k`'s block `c`,
+/// for the minimum terms). Returns each row's pairs' two results. The rows share every activation
+/// load.
 ///
 /// # Safety
-/// As [`dot`]; every `p[j]` the same number of blocks as `w` holds, `s` as many rows of `stride`
-/// (the last row needs only `2 · NP` values). At most 8 pairs.
+/// [`available`]; every `p[j]` the same number of 32-blocks, each `w[r]` as many of `fmt`, `s` as
+/// many rows of `stride` (the last row needs only `2 · NP` values). At most 8 pairs.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,f16c,avx512f,avx512bw,avx512vl,avx512vnni")]
-pub unsafe fn dot_pairs<const NP: usize>(
+pub unsafe fn dot_pairs<const NR: usize, const NP: usize>(
     fmt: Format,
-    w: &[u8],
+    w: &[&[u8]; NR],
     p: &[&[PairBlock]; NP],
     s: &[f32],
     stride: usize,
-) -> [[f32; 2]; NP] {
+) -> [[[f32; 2]; NP]; NR] {
     use std::arch::x86_64::*;
-    debug_assert!(handles(fmt) && NP <= 8);
-    debug_assert!(p.iter().all(|r| r.len() == p[0].len()));
-    debug_assert!(p[0].is_empty() || s.len() >= (p[0].len() - 1) * stride + 2 * NP);
+    use x86::WBlock;
+    debug_assert!(NP <= 8);
+    let nb = p[0].len();
+    debug_assert!(p.iter().all(|r| r.len() == nb));
+    debug_assert!(nb == 0 || s.len() >= (nb - 1) * stride + 2 * NP);
     let a = x86::Sums { s, stride };
+    let m4 = _mm256_set1_epi8(0x0f);
     match fmt {
-        Format::Q4_1 => x86::pairs::<NP, 20>(w, p, &a, |p| {
-            let (d, m) = x86::f16_pair(p);
-            (x86::nibbles(p.add(4)), d, Some(m))
+        Format::Q4_1 => x86::pairs::<NR, NP, false>(nb, p, &a, |r, c| {
+            let b = w[r].as_ptr().add(c * 20);
+            let (d, m) = x86::f16_pair(b);
+            WBlock::plain(x86::nibbles(b.add(4)), d, Some(m))
         }),
-        Format::Q5_0 => x86::pairs::<NP, 22>(w, p, &a, |p| {
+        Format::Q5_0 => x86::pairs::<NR, NP, false>(nb, p, &a, |r, c| {
+            let b = w[r].as_ptr().add(c * 22);
             // q - 16: the nibble where the fifth bit is set, else the nibble minus 16.
-            let qh = std::ptr::read_unaligned(p.add(2) as *const u32);
-            let nib = x86::nibbles(p.add(6));
-            (_mm256_mask_sub_epi8(nib, !qh, nib, _mm256_set1_epi8(16)), x86::f16(p), None)
+            let qh = std::ptr::read_unaligned(b.add(2) as *const u32);
+            let nib = x86::nibbles(b.add(6));
+            WBlock::plain(_mm256_mask_sub_epi8(nib, !qh, nib, _mm256_set1_epi8(16)), x86::f16(b), None)
         }),
-        Format::Q8_0 => {
-            x86::pairs::<NP, 34>(w, p, &a, |p| (_mm256_loadu_si256(p.add(2) as *const __m256i), x86::f16(p), None))
-        }
-        Format::Q4K => x86::q4k_pairs::<NP>(w, p, &a),
-        Format::Q6K => unreachable!("Q6_K is left to the AVX2 kernel"),
+        Format::Q8_0 => x86::pairs::<NR, NP, false>(nb, p, &a, |r, c| {
+            let b = w[r].as_ptr().add(c * 34);
+            WBlock::plain(_mm256_loadu_si256(b.add(2) as *const __m256i), x86::f16(b), None)
+        }),
+        Format::Q4K => x86::pairs::<NR, NP, false>(nb, p, &a, |r, c| {
+            let (b, j) = (w[r].as_ptr().add(c / 8 * 144), c % 8);
+            let (d, dmin) = x86::f16_pair(b);
+            let x = _mm256_loadu_si256(b.add(16 + 32 * (j / 2)) as *const __m256i);
+            // Even sub-blocks are the low nibbles, odd ones the high.
+            let q = _mm256_and_si256(_mm256_srl_epi16(x, _mm_cvtsi32_si128(4 * (j & 1) as i32)), m4);
+            let (sc, m) = q4k_scale_min(j, std::slice::from_raw_parts(b.add(4), 12));
+            WBlock::plain(q, d * sc as f32, Some(-(dmin * m as f32)))
+        }),
+        Format::Q6K => x86::pairs::<NR, NP, true>(nb, p, &a, |r, c| {
+            let (b, k) = (w[r].as_ptr().add(c / 8 * 210), c % 8);
+            let (n, kk) = (k / 4, k % 4);
+            let ql = _mm256_loadu_si256(b.add(64 * n + 32 * (kk & 1)) as *const __m256i);
+            let nib = _mm256_and_si256(_mm256_srl_epi16(ql, _mm_cvtsi32_si128(4 * (kk / 2) as i32)), m4);
+            let qh = _mm256_loadu_si256(b.add(128 + 32 * n) as *const __m256i);
+            let hi = _mm256_and_si256(_mm256_srl_epi16(qh, _mm_cvtsi32_si128(2 * kk as i32)), _mm256_set1_epi8(3));
+            let q = _mm256_sub_epi8(_mm256_or_si256(nib, _mm256_slli_epi16::<4>(hi)), _mm256_set1_epi8(32));
+            // Scale 2k over each token's low eight i16 lanes (elements 0..16), 2k + 1 over the high.
+            let scales = _mm512_cvtepi8_epi16(_mm256_zextsi128_si256(_mm_loadu_si128(b.add(192) as *const __m128i)));
+            let ones = 0x0001_0001_0001_0001;
+            let half = _mm512_set_epi64(ones, ones, 0, 0, ones, ones, 0, 0);
+            let sc = _mm512_permutexvar_epi16(_mm512_add_epi16(half, _mm512_set1_epi16(2 * k as i16)), scales);
+            WBlock::scaled(q, sc, x86::f16(b.add(208)))
+        }),
     }
 }
 
@@ -125,7 +158,13 @@ pub unsafe fn dot<const NR: usize, const NT: usize>(
 }
 
 #[cfg(not(target_arch = "x86_64"))]
-pub unsafe fn dot_pairs<const NP: usize>(_: Format, _: &[u8], _: &[&[PairBlock]; NP], _: &[f32], _: usize) -> [[f32; 2]; NP] {
+pub unsafe fn dot_pairs<const NR: usize, const NP: usize>(
+    _: Format,
+    _: &[&[u8]; NR],
+    _: &[&[PairBlock]; NP],
+    _: &[f32],
+    _: usize,
+) -> [[[f32; 2]; NP]; NR] {
     unreachable!("the AVX-512 kernels are only selected on x86_64")
 }
 
@@ -255,90 +294,100 @@ mod x86 {
         pub stride: usize,
     }
 
-    /// Accumulators for `NP` token pairs: the lanes (one token per 256-bit half) and the minimum
-    /// terms (token `k` in lane `k`: each is the same product then sum per block as elsewhere).
-    pub struct Pairs<const NP: usize> {
-        acc: [__m512; NP],
-        mins: __m512,
+    /// A weight block as the pair kernels take it: signed values `q` (element order) in both
+    /// halves, each lane's starting value `start` (which takes back the activations' +128), for
+    /// formats with a scale per 16 values the i16 scale of each 16-bit pair `sc`, the block's
+    /// float scale `f` and its minimum.
+    #[derive(Clone, Copy)]
+    pub struct WBlock {
+        q: __m512i,
+        sc: __m512i,
+        start: __m512i,
+        f: f32,
+        min: Option<f32>,
     }
 
-    impl<const NP: usize> Pairs<NP> {
+    impl WBlock {
         #[inline(always)]
-        unsafe fn new() -> Self {
-            Self { acc: [_mm512_setzero_ps(); NP], mins: _mm512_setzero_ps() }
+        unsafe fn zero() -> Self {
+            let z = _mm512_setzero_si512();
+            Self { q: z, sc: z, start: z, f: 0.0, min: None }
         }
 
-        /// Adds signed weight block `q` (element order) times block `c` of every pair.
+        /// A block without inner scales: each lane starts at `-128 · Σ q` over its four weights.
         #[inline(always)]
-        unsafe fn add(&mut self, q: __m256i, p: &[&[PairBlock]; NP], a: &Sums, c: usize, f: f32, min: Option<f32>) {
-            let wz = _mm512_broadcast_i64x4(q);
-            // The activations are a + 128: start each lane at -128 · Σ w over its four weights.
-            let corr = _mm512_dpbusd_epi32(_mm512_setzero_si512(), _mm512_set1_epi8(-128), wz);
-            let start = _mm512_sub_epi32(_mm512_setzero_si512(), corr);
-            let fv = _mm512_set1_ps(f);
+        pub unsafe fn plain(q: __m256i, f: f32, min: Option<f32>) -> Self {
+            let q = _mm512_broadcast_i64x4(q);
+            let corr = _mm512_dpbusd_epi32(_mm512_setzero_si512(), _mm512_set1_epi8(-128), q);
+            Self { q, sc: _mm512_setzero_si512(), start: _mm512_sub_epi32(_mm512_setzero_si512(), corr), f, min }
+        }
+
+        /// A block with the i16 scales `sc` per 16-bit pair: each lane starts at `-128 · sc · Σ q`.
+        #[inline(always)]
+        pub unsafe fn scaled(q: __m256i, sc: __m512i, f: f32) -> Self {
+            let q = _mm512_broadcast_i64x4(q);
+            // 128 · (q + q') pairs (|·| ≤ 8192) times -sc (≤ 128).
+            let q128 = _mm512_maddubs_epi16(_mm512_set1_epi8(-128), q);
+            let start = _mm512_dpwssd_epi32(_mm512_setzero_si512(), q128, _mm512_sub_epi16(_mm512_setzero_si512(), sc));
+            Self { q, sc, start, f, min: None }
+        }
+    }
+
+    /// `NR` rows of `nb` 32-blocks against `NP` pairs; `decode(r, c)` gives row `r`'s block `c`.
+    /// `SCALED`: the blocks have scales per 16 values ([`WBlock::scaled`]). Per row and pair: the
+    /// lanes (one token per 256-bit half); per row: the minimum terms (token `k` in lane `k`: each
+    /// is the same product then sum per block as elsewhere).
+    #[inline(always)]
+    pub unsafe fn pairs<const NR: usize, const NP: usize, const SCALED: bool>(
+        nb: usize,
+        p: &[&[PairBlock]; NP],
+        a: &Sums,
+        decode: impl Fn(usize, usize) -> WBlock,
+    ) -> [[[f32; 2]; NP]; NR] {
+        let mut acc = [[_mm512_setzero_ps(); NP]; NR];
+        let mut mins = [_mm512_setzero_ps(); NR];
+        for c in 0..nb {
+            // A plain loop: a closure (`array::from_fn`) would not inherit the target features.
+            let mut wb = [WBlock::zero(); NR];
+            for r in 0..NR {
+                wb[r] = decode(r, c);
+            }
             for j in 0..NP {
                 let b = p[j].get_unchecked(c);
                 let av = _mm512_load_si512(b.qs.as_ptr() as *const _);
-                let lanes = _mm512_dpbusd_epi32(start, av, wz);
-                let x = _mm512_mul_ps(_mm512_cvtepi32_ps(lanes), fv);
-                self.acc[j] = _mm512_fmadd_ps(x, _mm512_load_ps(b.d.as_ptr()), self.acc[j]);
+                let d = _mm512_load_ps(b.d.as_ptr());
+                for r in 0..NR {
+                    let lanes = if SCALED {
+                        // (a + 128) · q pairs: at most 2 · 255 · 32 in magnitude, inside i16.
+                        _mm512_dpwssd_epi32(wb[r].start, _mm512_maddubs_epi16(av, wb[r].q), wb[r].sc)
+                    } else {
+                        _mm512_dpbusd_epi32(wb[r].start, av, wb[r].q)
+                    };
+                    let x = _mm512_mul_ps(_mm512_cvtepi32_ps(lanes), _mm512_set1_ps(wb[r].f));
+                    acc[r][j] = _mm512_fmadd_ps(x, d, acc[r][j]);
+                }
             }
-            if let Some(m) = min {
+            if wb.iter().any(|b| b.min.is_some()) {
                 // The masked-off lanes are not read.
                 let s = _mm512_maskz_loadu_ps(((1u32 << (2 * NP)) - 1) as u16, a.s.as_ptr().add(c * a.stride));
-                self.mins = _mm512_add_ps(self.mins, _mm512_mul_ps(_mm512_set1_ps(m), s));
-            }
-        }
-
-        #[inline(always)]
-        unsafe fn finish(self) -> [[f32; 2]; NP] {
-            let mut out = [[0f32; 2]; NP];
-            let mut mins = [0f32; 16];
-            _mm512_storeu_ps(mins.as_mut_ptr(), self.mins);
-            for j in 0..NP {
-                let lo = _mm512_castps512_ps256(self.acc[j]);
-                let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(self.acc[j])));
-                // Formats without minimums add 0.0, as the scalar code does.
-                out[j] = [reduce(lo) + mins[2 * j], reduce(hi) + mins[2 * j + 1]];
-            }
-            out
-        }
-    }
-
-    /// One row of 32-blocks of `BB` bytes against `NP` pairs; `decode` gives a block's signed
-    /// weights (element order), scale and minimum.
-    #[inline(always)]
-    pub unsafe fn pairs<const NP: usize, const BB: usize>(
-        w: &[u8],
-        p: &[&[PairBlock]; NP],
-        a: &Sums,
-        decode: impl Fn(*const u8) -> (__m256i, f32, Option<f32>),
-    ) -> [[f32; 2]; NP] {
-        let mut st = Pairs::<NP>::new();
-        for c in 0..p[0].len() {
-            let (q, f, min) = decode(w.as_ptr().add(c * BB));
-            st.add(q, p, a, c, f, min);
-        }
-        st.finish()
-    }
-
-    #[inline(always)]
-    pub unsafe fn q4k_pairs<const NP: usize>(w: &[u8], p: &[&[PairBlock]; NP], a: &Sums) -> [[f32; 2]; NP] {
-        let m4 = _mm256_set1_epi8(0x0f);
-        let mut st = Pairs::<NP>::new();
-        for sb in 0..p[0].len() / 8 {
-            let b = std::slice::from_raw_parts(w.as_ptr().add(sb * 144), 144);
-            let (d, dmin) = f16_pair(b.as_ptr());
-            for jj in 0..4 {
-                let x = _mm256_loadu_si256(b.as_ptr().add(16 + 32 * jj) as *const __m256i);
-                let halves = [_mm256_and_si256(x, m4), _mm256_and_si256(_mm256_srli_epi16::<4>(x), m4)];
-                for (h, q) in halves.into_iter().enumerate() {
-                    let j = 2 * jj + h;
-                    let (sc, m) = q4k_scale_min(j, &b[4..16]);
-                    st.add(q, p, a, sb * 8 + j, d * sc as f32, Some(-(dmin * m as f32)));
+                for r in 0..NR {
+                    if let Some(m) = wb[r].min {
+                        mins[r] = _mm512_add_ps(mins[r], _mm512_mul_ps(_mm512_set1_ps(m), s));
+                    }
                 }
             }
         }
-        st.finish()
+        let mut out = [[[0f32; 2]; NP]; NR];
+        for r in 0..NR {
+            let mut m = [0f32; 16];
+            _mm512_storeu_ps(m.as_mut_ptr(), mins[r]);
+            for j in 0..NP {
+                let lo = _mm512_castps512_ps256(acc[r][j]);
+                let hi = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(acc[r][j])));
+                // Formats without minimums add 0.0, as the scalar code does.
+                out[r][j] = [reduce(lo) + m[2 * j], reduce(hi) + m[2 * j + 1]];
+            }
+        }
+        out
     }
 }

@@ -262,3 +262,53 @@ fn avx512_kernels_equal_the_scalar_ones_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn avx512_q6k_equals_scalar_at_the_extremes() {
+    if !avx512::available() {
+        eprintln!("skipped: this CPU has no AVX-512 VNNI");
+        return;
+    }
+    // Weights of -32 and 31 under scales of -128 and 127, against activations of ±127: the largest
+    // 16-bit pair products (2 · 255 · 32 with the +128 offset) and lane sums the pair kernel makes.
+    let (rows, cols) = (6, 512);
+    let mut rng = StdRng::seed_from_u64(23);
+    let mut m = random_blocks(&mut rng, Format::Q6K, rows, cols);
+    if let Storage::Quant { data, .. } = &mut m.storage {
+        for (i, b) in data.chunks_exact_mut(210).enumerate() {
+            let low = i % 2 == 0;
+            b[..192].fill(if low { 0x00 } else { 0xff });
+            b[192..208].fill(if (i / 2) % 2 == 0 { 0x80 } else { 0x7f });
+        }
+    }
+    for t in [4, 6, 16, 34] {
+        let x: Vec<f32> = (0..t * cols).map(|e| if (e / 7) % 2 == 0 { -1.0 } else { 1.0 }).collect();
+        let mut q = Q8Acts::default();
+        q.quantize_for(&x, t, cols, Kernel::Avx512);
+        let want = run(&m, &q, &x, t, Kernel::Scalar);
+        let got = run(&m, &q, &x, t, Kernel::Avx512);
+        assert!(want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits()), "t {t}: {want:?}\n{got:?}");
+    }
+}
+
+#[test]
+fn activation_quantisation_with_avx2_equals_the_portable_code() {
+    if !avx2::available() {
+        eprintln!("skipped: this CPU has no AVX2/FMA");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(29);
+    for k in 0..2000 {
+        let mut xs = randn(&mut rng, QK);
+        // Values on the rounding halves, and all-zero blocks.
+        match k % 4 {
+            0 => xs.iter_mut().enumerate().for_each(|(e, v)| *v = (e as f32 - 15.5) * 0.5),
+            1 => xs.fill(0.0),
+            _ => {}
+        }
+        let a = quantize_block_with(&xs);
+        // SAFETY: AVX2 is present (checked above).
+        let b = unsafe { quantize_block_avx2(&xs) };
+        assert!(a.d.to_bits() == b.d.to_bits() && a.s.to_bits() == b.s.to_bits() && a.qs == b.qs, "{xs:?}");
+    }
+}
