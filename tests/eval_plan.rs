@@ -272,7 +272,7 @@ fn on_eai_tasks_the_cli_leaves_out_the_actions_eai_cannot_score() {
         let plans: String = entries.iter().map(|e| e["llm_output"].as_str().unwrap().to_string()).collect();
         (v, plans)
     };
-    let unscoreable = ["SLEEP", "WAKEUP", "LOOKAT_SHORT", "LOOKAT_LONG"];
+    let unscoreable = ["SLEEP", "WAKEUP", "LOOKAT_SHORT", "LOOKAT_LONG", "RELEASE"];
     let (v, exported) = run(&[]);
     assert_eq!(v["excluded_verbs"], serde_json::json!(unscoreable));
     for verb in unscoreable {

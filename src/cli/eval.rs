@@ -87,7 +87,8 @@ pub struct PlanArgs {
     #[command(flatten)]
     pub rules: super::args::DecisionArgs,
     /// On EAI's tasks, also offer the actions EAI's own scorer cannot score (SLEEP, WAKEUP,
-    /// LOOKAT_SHORT, LOOKAT_LONG); they are left out by default so `--export-eai` plans can be scored.
+    /// LOOKAT_SHORT, LOOKAT_LONG, RELEASE); they are left out by default so `--export-eai` plans can be
+    /// scored.
     #[arg(long)]
     pub all_verbs: bool,
     /// Write one JSON-lines trace per task here (<id>.jsonl).

@@ -229,12 +229,15 @@ fn per_task(reports: &[TaskPlanReport], f: impl Fn(&TaskPlanReport) -> usize) ->
 
 /// Verbs of our embodiment that EAI's own scorer cannot score, left out of the grammars on EAI's
 /// tasks so exported plans can be scored there: SLEEP and WAKEUP are not in its action space (a
-/// hallucination error), LOOKAT_SHORT and LOOKAT_LONG have no executor there (the scorer crashes).
-pub const EAI_UNSCOREABLE: [crate::action::Verb; 4] = [
+/// hallucination error), LOOKAT_SHORT and LOOKAT_LONG have no executor there (the scorer crashes),
+/// and RELEASE is missing from the list its hallucination check accepts (`valid_actions` in EAI's
+/// `eval_utils.py`), so a plan with it is scored a hallucination although EAI's executor runs it.
+pub const EAI_UNSCOREABLE: [crate::action::Verb; 5] = [
     crate::action::Verb::Sleep,
     crate::action::Verb::WakeUp,
     crate::action::Verb::LookAtShort,
     crate::action::Verb::LookAtLong,
+    crate::action::Verb::Release,
 ];
 
 /// The batch report.
