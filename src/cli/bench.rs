@@ -186,9 +186,12 @@ fn spawn_neighbours() -> anyhow::Result<Vec<Child>> {
 
 /// One line of where a token's decode time goes.
 fn parts(t: &TokenTime) -> String {
+    // A part that rounds to zero is printed as 0.0, never as -0.0 (differences of medians can be
+    // slightly negative).
+    let z = |x: f64| if x.abs() < 0.05 { 0.0 } else { x };
     format!(
         "{:.0} = forward {:.0} + forced {:.0} + mask {:.1} + grammar {:.1} + sample {:.1} + stream {:.1} + other {:.1}",
-        t.total, t.forward, t.forced_forward, t.mask, t.grammar, t.sample, t.stream, t.other
+        z(t.total), z(t.forward), z(t.forced_forward), z(t.mask), z(t.grammar), z(t.sample), z(t.stream), z(t.other)
     )
 }
 
