@@ -69,18 +69,15 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
 fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     a.inference.apply();
     let path = resolve_model(&a.model)?;
+    // The neighbours start before the model loads, as on a robot PC where they already run when the
+    // planner starts (so `--threads auto` sees them); they are stopped however this ends.
+    let _neighbours = if a.busy_neighbour { Neighbours::start()? } else { Neighbours(Vec::new()) };
     let mut engine = Engine::load_with_slices(&path, &[crate::grammar::TEXT_SLICE.to_string()])?;
     if let Some(llama) = &a.compare {
         return compare(a, &mut engine, &path, llama);
     }
     let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens };
-    let neighbours = if a.busy_neighbour { spawn_neighbours()? } else { Vec::new() };
-    let report = run_llm_bench(&mut engine, &cfg);
-    for mut c in neighbours {
-        let _ = c.kill();
-        let _ = c.wait();
-    }
-    let report = report?;
+    let report = run_llm_bench(&mut engine, &cfg)?;
     let mut json = serde_json::to_value(&report)?;
     json["busy_neighbour"] = serde_json::Value::Bool(a.busy_neighbour);
     eprintln!("{}", table(&report));
@@ -92,7 +89,6 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
 fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyhow::Result<()> {
     let threads = crate::llm::kernels::pool::global().threads();
     let cfg = LlmBenchConfig { runs: 1, decode_tokens: a.decode_tokens };
-    let neighbours = if a.busy_neighbour { spawn_neighbours()? } else { Vec::new() };
     let result = (|| -> anyhow::Result<_> {
         let (mut ours_p, mut ours_d, mut theirs_p, mut theirs_d) = (vec![], vec![], vec![], vec![]);
         let mut prompt_tokens = 0;
@@ -111,10 +107,6 @@ fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyh
         }
         Ok((prompt_tokens, median(ours_p), median(ours_d), median(theirs_p), median(theirs_d)))
     })();
-    for mut c in neighbours {
-        let _ = c.kill();
-        let _ = c.wait();
-    }
     let (prompt_tokens, op, od, tp, td) = result?;
     eprintln!(
         "{} threads, {prompt_tokens}-token prompt, {} generated, medians of {} rounds{}:\n\
@@ -168,20 +160,36 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
-/// One burning process per core, so our threads always have a competitor.
-fn spawn_neighbours() -> anyhow::Result<Vec<Child>> {
-    let exe = std::env::current_exe()?;
-    let n = std::thread::available_parallelism().map_or(1, |n| n.get());
-    (0..n)
-        .map(|_| {
-            Command::new(&exe)
-                .args(["bench", "burn", "--seconds", "3600"])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .map_err(anyhow::Error::from)
-        })
-        .collect()
+/// One burning process per core, so our threads always have a competitor; killed when dropped.
+struct Neighbours(Vec<Child>);
+
+impl Neighbours {
+    fn start() -> anyhow::Result<Neighbours> {
+        let exe = std::env::current_exe()?;
+        let n = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let mut started = Neighbours(Vec::new());
+        for _ in 0..n {
+            started.0.push(
+                Command::new(&exe)
+                    .args(["bench", "burn", "--seconds", "3600"])
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()?,
+            );
+        }
+        // Let them get going before anything counts the busy cores.
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        Ok(started)
+    }
+}
+
+impl Drop for Neighbours {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
 }
 
 /// One line of where a token's decode time goes.
