@@ -28,12 +28,7 @@ pub fn typed_set(world: &World, ids: &[u32]) -> ActionSet {
     let objects = scene_objects(world, ids);
     let mut verbs = Vec::new();
     for &v in Verb::ALL {
-        let slots: Vec<Vec<ObjRef>> = (0..v.arity())
-            .map(|i| {
-                let need = SlotRequirement::of(v, i);
-                objects.iter().filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n))).cloned().collect()
-            })
-            .collect();
+        let slots: Vec<Vec<ObjRef>> = (0..v.arity()).map(|i| fitting(world, &objects, v, i)).collect();
         if slots.iter().all(|s: &Vec<ObjRef>| !s.is_empty()) {
             verbs.push(VerbSpec::from(v).restricted(slots));
         }
@@ -46,10 +41,7 @@ pub fn typed_set(world: &World, ids: &[u32]) -> ActionSet {
 /// run yet as subgoals ("make this action possible, then do it"); verbs without objects are left out.
 pub fn typed_actions(world: &World, ids: &[u32]) -> Vec<Action> {
     let objects = scene_objects(world, ids);
-    let fits = |v: Verb, i: usize| -> Vec<ObjRef> {
-        let need = SlotRequirement::of(v, i);
-        objects.iter().filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n))).cloned().collect()
-    };
+    let fits = |v: Verb, i: usize| fitting(world, &objects, v, i);
     let mut out = Vec::new();
     for &verb in Verb::ALL {
         match verb.arity() {
@@ -66,6 +58,12 @@ pub fn typed_actions(world: &World, ids: &[u32]) -> Vec<Action> {
         }
     }
     out
+}
+
+/// The `objects` whose properties fit slot `i` of `verb` ([`SlotRequirement::of`]).
+fn fitting(world: &World, objects: &[ObjRef], verb: Verb, i: usize) -> Vec<ObjRef> {
+    let need = SlotRequirement::of(verb, i);
+    objects.iter().filter(|o| world.node(o.id).is_some_and(|n| need.admits(world, &n))).cloned().collect()
 }
 
 /// `feasible`: exactly the actions over `ids` that would succeed now ([`World::feasible_actions_among`]),

@@ -124,8 +124,6 @@ pub(crate) struct Run<'a> {
     rng: Option<StdRng>,
     /// `focus` is every object of the scene (nothing narrowed it), so the root narrows it itself.
     focus_is_scene: bool,
-    /// The nodes that are target subgoals, with their action (see [`PlannerConfig::target_subgoals`]).
-    targets: std::collections::HashMap<NodeId, Action>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -160,12 +158,11 @@ pub(crate) fn run_tree(
         executed: Vec::new(),
         start: Instant::now(),
         rng: (cfg.kind == PlannerKind::Random).then(|| StdRng::seed_from_u64(cfg.random_seed)),
-        targets: Default::default(),
     };
     run.node_event(0);
     let root = run.tree.root();
     run.set_status(root, Status::Decomposing, "the instruction");
-    let stop = match run.expand(root) {
+    let stop = match run.expand(root, None) {
         Ok(End::Complete) => {
             run.set_status(root, Status::Executed, "the model said done");
             StopCause::Done
@@ -257,7 +254,7 @@ impl Run<'_> {
         Ok(out)
     }
 
-    /// The target subgoals a decision at `node` may write (line, action): the actions of the
+    /// The target subgoals a decision at `node` may write: the actions of the
     /// `typed` set over the node's objects that cannot run now (the runnable ones are offered as
     /// actions) and that the world knows a way to, moves left out (a walk is never out of reach),
     /// each taken at most once per node.
@@ -269,7 +266,7 @@ impl Run<'_> {
         feasible: &ActionSet,
         allowed: bool,
         st: &NodeLoop,
-    ) -> Result<Vec<(String, Action)>, StopCause> {
+    ) -> Result<Vec<Action>, StopCause> {
         let ActionSet::Exact(feasible) = feasible else { return Ok(Vec::new()) };
         if !allowed || !self.cfg.target_subgoals || self.mode == ContextMode::NoSubgoalTree {
             return Ok(Vec::new());
@@ -280,9 +277,7 @@ impl Run<'_> {
             .into_iter()
             .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
-            .filter(|a| w.reaches(a))
-            .map(|a| (a.to_string(), a))
-            .filter(|(line, _)| !st.tried.contains(line))
+            .filter(|a| w.reaches(a) && !st.tried.contains(&a.to_string()))
             .collect();
         Ok(menu)
     }
@@ -413,13 +408,12 @@ impl Run<'_> {
         Ok(list[best].clone())
     }
 
-    /// Expands `node` until the model says `done` for it or a per-node budget abandons it.
-    fn expand(&mut self, node: NodeId) -> Result<End, StopCause> {
+    /// Expands `node` until the model says `done` for it or a per-node budget abandons it. A target
+    /// subgoal (`target`: its action, see `PlannerConfig::target_subgoals`) is done when that action runs.
+    fn expand(&mut self, node: NodeId, target: Option<Action>) -> Result<End, StopCause> {
         let depth = self.tree.node(node).depth;
         let budgets = self.cfg.budgets.clone();
         let mut st = NodeLoop { start_actions: self.executed.len(), ..NodeLoop::default() };
-        // A target subgoal is done when its action runs (see `PlannerConfig::target_subgoals`).
-        let target = self.targets.get(&node).cloned();
         // The root is bounded by the run's budgets (calls, actions, deadline) alone: abandoning it
         // ends the run, and a plan needs more steps than a subgoal.
         let is_root = node == self.tree.root();
@@ -431,6 +425,8 @@ impl Run<'_> {
         // With `single_step_lines`, such a node is complete once one step (an action, or a target
         // whose action ran) has been accepted.
         let one_step = under_offered && self.cfg.single_step_lines;
+        // Whether a step that ran completes this node.
+        let completes = |a: &Action| target.as_ref() == Some(a) || one_step;
         loop {
             if !is_root && st.replans > budgets.max_replans {
                 return Ok(End::Abandoned("replans"));
@@ -483,7 +479,7 @@ impl Run<'_> {
                 // Targets are written as actions: the model names the action it wants done, and one
                 // that cannot run yet becomes a subgoal worked out below it.
                 (None, ActionSet::Exact(mut list)) if !targets.is_empty() => {
-                    list.extend(targets.iter().map(|(_, a)| a.clone()));
+                    list.extend(targets.iter().cloned());
                     ActionSet::Exact(list)
                 }
                 (None, actions) => actions,
@@ -547,12 +543,12 @@ impl Run<'_> {
                 }
                 p => p,
             };
-            let (child_text, child_action) = match &proposal {
+            // (`target_child`: a target, a subgoal named by its action)
+            let (child_text, child_action, target_child) = match &proposal {
                 Proposal::Done => return Ok(End::Complete),
-                Proposal::Subgoal(s) => (s.clone(), None),
-                // A target: a subgoal named by its action.
-                Proposal::Action(a) if targets.iter().any(|(_, t)| t == a) => (a.to_string(), None),
-                Proposal::Action(a) => (a.to_string(), Some(a.clone())),
+                Proposal::Subgoal(s) => (s.clone(), None, None),
+                Proposal::Action(a) if targets.contains(a) => (a.to_string(), None, Some(a.clone())),
+                Proposal::Action(a) => (a.to_string(), Some(a.clone()), None),
             };
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
             st.children += 1;
@@ -578,7 +574,7 @@ impl Run<'_> {
                 let r = self.execute(child, a)?;
                 let ran = r.is_ok();
                 st.executed(&child_text, a, r, &mut self.stats);
-                if ran && (target.as_ref() == Some(a) || one_step) {
+                if ran && completes(a) {
                     return Ok(End::Complete);
                 }
                 continue;
@@ -589,13 +585,7 @@ impl Run<'_> {
             // it is decomposed without a verdict, as the random chooser does. A tiny model's verdicts
             // on such lines were found to be replans with made-up reasons.
             // A target subgoal is congruent and not runnable now by construction: decomposed too.
-            let target_child = if child_action.is_none() {
-                targets.iter().find(|(line, _)| *line == child_text).map(|(_, a)| a.clone())
-            } else {
-                None
-            };
-            if let Some(t) = &target_child {
-                self.targets.insert(child, t.clone());
+            if target_child.is_some() {
                 st.tried.push(child_text.clone());
             }
             let offered_child = child_action.is_none()
@@ -660,7 +650,7 @@ impl Run<'_> {
                 }
                 Verdict::Decompose => {
                     self.set_status(child, Status::Decomposing, "not one action");
-                    match self.expand(child)? {
+                    match self.expand(child, target_child.clone())? {
                         End::Complete => {
                             self.set_status(child, Status::Executed, "all its steps are done");
                             st.accepted += 1;
@@ -691,7 +681,7 @@ impl Run<'_> {
                     let r = self.execute(child, &a)?;
                     let ran = r.is_ok();
                     st.executed(&child_text, &a, r, &mut self.stats);
-                    if ran && (target.as_ref() == Some(&a) || one_step) {
+                    if ran && completes(&a) {
                         return Ok(End::Complete);
                     }
                 }
@@ -760,25 +750,13 @@ impl Run<'_> {
     /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
     fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
         let rng = self.rng.as_mut().expect("draw is called for the random planner only");
-        let menu: &[String] = if dg.allow_subgoal { &dg.subgoal_menu } else { &[] };
-        // The root's goal lines come first (no actions are offered beside them).
-        let actions = match &dg.actions {
-            ActionSet::Exact(list) => list.len(),
-            _ => 0,
-        };
-        if !menu.is_empty() && actions == 0 {
-            return Some(format!("subgoal: {}", menu[rng.random_range(0..menu.len())]));
+        if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
+            return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
         }
-        // Steps taken below this node, in its target subgoals too.
+        // Steps taken below this node count, in its target subgoals too; targets are among the
+        // actions, so one uniform draw covers both.
         if self.executed.len() - st.start_actions >= self.cfg.random_steps {
             return dg.allow_done.then(|| "done".to_string());
-        }
-        // One uniform draw over everything admitted: target subgoals and actions alike.
-        if !menu.is_empty() {
-            let i = rng.random_range(0..menu.len() + actions);
-            if i < menu.len() {
-                return Some(format!("subgoal: {}", menu[i]));
-            }
         }
         match super::baseline::draw(&dg.actions, rng) {
             Some(a) => Some(format!("action: {a}")),
