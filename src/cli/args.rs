@@ -149,6 +149,21 @@ pub struct DecisionArgs {
     /// it), instead of steps until the model says `done` there.
     #[arg(long)]
     pub single_step_lines: bool,
+    /// Say only "ok" after a step (by default: "ok, now <what it changed among its objects>", in
+    /// the goal lines' words).
+    #[arg(long)]
+    pub no_change_report: bool,
+    /// Let a node's steps undo what its earlier steps changed (by default a step that would, e.g.
+    /// SWITCHOFF after the node's SWITCHON, is not offered; holding and closeness excepted).
+    #[arg(long)]
+    pub no_protect: bool,
+    /// Where `done` may be answered, the model is done when its probability of `done` as the
+    /// answer's first word (against `action:` and `subgoal:`) is at least P.
+    #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT)]
+    pub done_at: f64,
+    /// Take `done` only when greedy decoding writes it (no look at its probability).
+    #[arg(long)]
+    pub no_done_check: bool,
 }
 
 impl DecisionArgs {
@@ -162,5 +177,8 @@ impl DecisionArgs {
         cfg.target_subgoals = !self.no_target_subgoals;
         cfg.target_steps = !self.no_target_steps;
         cfg.single_step_lines = self.single_step_lines;
+        cfg.report_changes = !self.no_change_report;
+        cfg.protect_changes = !self.no_protect;
+        cfg.done_at = (!self.no_done_check).then_some(self.done_at);
     }
 }

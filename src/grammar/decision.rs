@@ -446,6 +446,12 @@ impl DecomposeGrammar {
             ActionSet::Exact(list) if list.len() == 1 && !self.allow_subgoal && !self.allow_done => {
                 Some(format!("action: {}", list[0]))
             }
+            // One offered line left and nothing else (a root working through a task's goal lines).
+            ActionSet::Exact(list)
+                if list.is_empty() && self.allow_subgoal && self.subgoal_menu.len() == 1 && !self.allow_done =>
+            {
+                Some(format!("subgoal: {}", self.subgoal_menu[0]))
+            }
             _ => None,
         }
     }
@@ -707,6 +713,27 @@ impl PlanGrammar {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_choice_is_the_one_admissible_answer() {
+        let one = |list: Vec<Action>, sub: bool, done: bool, menu: &[&str]| {
+            DecomposeGrammar {
+                actions: ActionSet::Exact(list),
+                subgoal_chars: 20,
+                allow_subgoal: sub,
+                allow_done: done,
+                subgoal_menu: menu.iter().map(|s| s.to_string()).collect(),
+            }
+            .only_choice()
+        };
+        let walk = Action::new(Verb::Walk, vec![ObjRef::new("apple", 12)]).unwrap();
+        assert_eq!(one(vec![walk.clone()], false, false, &[]).as_deref(), Some("action: [WALK] <apple> (12)"));
+        assert_eq!(one(vec![walk.clone()], false, true, &[]), None);
+        assert_eq!(one(vec![], true, false, &["fridge is OPEN"]).as_deref(), Some("subgoal: fridge is OPEN"));
+        assert_eq!(one(vec![], true, false, &["fridge is OPEN", "apple is ON"]), None);
+        assert_eq!(one(vec![], true, false, &[]), None, "free text is no single answer");
+        assert_eq!(one(vec![walk], true, false, &["fridge is OPEN"]), None);
+    }
 
     fn o(c: &str, id: u32) -> ObjRef {
         ObjRef::new(c, id)

@@ -189,6 +189,19 @@ pub struct PlannerConfig {
     /// Drop steps that repeat recent ones (see [`planner::fresh_steps`]; exact action sets only;
     /// the random planner obeys it too).
     pub fresh_steps: bool,
+    /// Say, after each step, what it changed among its objects in the goal lines' words ("ok, now
+    /// television is ON"; a robot bridge's own observation, when it sends one, instead).
+    pub report_changes: bool,
+    /// A node's steps do not undo what its earlier steps changed (SWITCHOFF after its SWITCHON, STANDUP
+    /// after its SIT): a candidate step is tried on a copy of the world first. Holding and closeness
+    /// are left out: they are means (a grab is undone by the put it was for). The random planner
+    /// obeys it too. A rule on the node's own steps, not a look at the goals.
+    pub protect_changes: bool,
+    /// Where `done` may be answered, the model is done when its own probability of `done` as the
+    /// answer's first word (against `action:` and `subgoal:`) is at least this: greedy decoding takes
+    /// `done` only when it comes first, and a tiny model shown more action lines than `done` lines
+    /// rarely puts it first even once the goal's action has run. `None`: greedy decoding alone.
+    pub done_at: Option<f64>,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
     /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
@@ -200,6 +213,9 @@ pub struct PlannerConfig {
     /// Longest replan reason a verdict may write.
     pub reason_chars: usize,
 }
+
+/// The default [`PlannerConfig::done_at`].
+pub const DONE_AT: f64 = 0.2;
 
 impl Default for PlannerConfig {
     fn default() -> Self {
@@ -220,6 +236,9 @@ impl Default for PlannerConfig {
             oracle_stop: false,
             judge_actions: false,
             fresh_steps: true,
+            report_changes: true,
+            protect_changes: true,
+            done_at: Some(DONE_AT),
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
             observe_budget: 600,
@@ -430,6 +449,9 @@ impl PlannerConfig {
             "oracle_stop": self.oracle_stop,
             "judge_actions": self.judge_actions,
             "fresh_steps": self.fresh_steps,
+            "report_changes": self.report_changes,
+            "protect_changes": self.protect_changes,
+            "done_at": self.done_at,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
@@ -499,6 +521,9 @@ impl PlannerConfig {
         c.target_subgoals = v.get("target_subgoals").and_then(Value::as_bool).unwrap_or(false);
         c.target_steps = v.get("target_steps").and_then(Value::as_bool).unwrap_or(false);
         c.single_step_lines = v.get("single_step_lines").and_then(Value::as_bool).unwrap_or(false);
+        c.report_changes = v.get("report_changes").and_then(Value::as_bool).unwrap_or(false);
+        c.protect_changes = v.get("protect_changes").and_then(Value::as_bool).unwrap_or(false);
+        c.done_at = v.get("done_at").and_then(Value::as_f64);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,

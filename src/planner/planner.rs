@@ -81,6 +81,9 @@ struct NodeLoop {
     /// Actions the run had executed when this node's expansion began (the random chooser counts
     /// the steps taken below a node from it).
     start_actions: usize,
+    /// What this node's steps changed (the objects, the fact), kept from being undone by its later
+    /// steps (see `PlannerConfig::protect_changes`).
+    established: Vec<(Vec<u32>, String)>,
 }
 
 impl NodeLoop {
@@ -124,6 +127,9 @@ pub(crate) struct Run<'a> {
     rng: Option<StdRng>,
     /// `focus` is every object of the scene (nothing narrowed it), so the root narrows it itself.
     focus_is_scene: bool,
+    /// What the last executed action changed among its objects (its object ids, and the facts that
+    /// hold after it and did not before, in the goal lines' words).
+    last_change: (Vec<u32>, Vec<String>),
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -145,6 +151,7 @@ pub(crate) fn run_tree(
     });
     let mut run = Run {
         focus_is_scene,
+        last_change: (Vec::new(), Vec::new()),
         model,
         env,
         req,
@@ -257,7 +264,7 @@ impl Run<'_> {
     /// The target subgoals a decision at `node` may write: the actions of the
     /// `typed` set over the node's objects that cannot run now (the runnable ones are offered as
     /// actions) and that the world knows a way to, moves left out (a walk is never out of reach),
-    /// each taken at most once per node.
+    /// each taken at most once per node, and only those that change something among their objects.
     /// `feasible` is the node's feasible set. Empty unless [`PlannerConfig::target_subgoals`] and
     /// the feasible grammar are on and the node may have subgoals at all (`allowed`).
     fn target_menu(
@@ -277,7 +284,8 @@ impl Run<'_> {
             .into_iter()
             .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
-            .filter(|a| w.reaches(a) && !st.tried.contains(&a.to_string()))
+            .filter(|a| !st.tried.contains(&a.to_string()))
+            .filter(|a| w.after_way_to(a).is_some_and(|after| changes_its_objects(w, &after, a)))
             .collect();
         Ok(menu)
     }
@@ -367,6 +375,42 @@ impl Run<'_> {
         self.tree.add_call(node, self.stats.calls.len());
         self.stats.calls.push(rec);
         Ok(Some(g.text))
+    }
+
+    /// Whether the model is done at `node` by its own probability of `done` as its answer's first
+    /// word (see [`PlannerConfig::done_at`]). A model that cannot score leaves it to generation.
+    fn done_check(&mut self, node: NodeId, prompt: &Prompt, subgoals: bool) -> Result<bool, StopCause> {
+        let Some(at) = self.cfg.done_at else { return Ok(false) };
+        self.check_global()?;
+        let mut words = vec!["done".to_string(), "action:".to_string()];
+        if subgoals {
+            words.push("subgoal:".to_string());
+        }
+        let hash = prompt_hash(prompt, &words.join("\n"));
+        let t = Instant::now();
+        let scoring = match self.model.score(prompt, &words) {
+            Ok(s) => s,
+            Err(e) => {
+                self.trace.event("call_error", json!({"role": "done_check", "node": node, "prompt_hash": hash,
+                    "kind": "no_score", "error": e.to_string()}));
+                return Ok(false);
+            }
+        };
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        // The share of `done` among the answers' first words.
+        let odds: Vec<f64> = scoring.scores.iter().map(|s| s.logprob.exp()).collect();
+        let p = odds[0] / odds.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+        let done = p >= at;
+        let rec = CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms);
+        self.stats.prompt_tokens += rec.prompt_tokens;
+        self.stats.reused_tokens += rec.reused_tokens;
+        self.stats.output_tokens += rec.output_tokens;
+        self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
+        self.trace.event("done_check", json!({"node": node, "p_done": (p * 1000.0).round() / 1000.0, "done": done}));
+        self.tree.add_call(node, self.stats.calls.len());
+        self.stats.calls.push(rec);
+        Ok(done)
     }
 
     /// The action of an `action:` proposal chosen by likelihood: every action of an exact set is
@@ -468,6 +512,13 @@ impl Run<'_> {
                 }
                 set => set,
             };
+            let actions = match actions {
+                ActionSet::Exact(list) if self.cfg.protect_changes && !st.established.is_empty() => {
+                    let w = self.world()?;
+                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &st.established)).collect())
+                }
+                set => set,
+            };
             // With target steps, a target node's one step is the world's next step towards its action.
             let toward = match (&target, self.cfg.target_steps) {
                 (Some(t), true) => Some(self.world()?.first_step_towards(t)),
@@ -510,8 +561,10 @@ impl Run<'_> {
             // has been accepted, once every offered subgoal was taken, or when nothing else can be
             // written.
             // (a target node with target steps ends when its action runs, not when the model says so)
+            // A root shown goal lines is decomposed into them: it is not done while one is left.
             let allow_done = !(target.is_some() && self.cfg.target_steps)
-                && (st.accepted > 0 || (offered && subgoal_menu.is_empty()) || (!allow_subgoal && actions.is_empty()));
+                && !(offered && !subgoal_menu.is_empty())
+                && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()));
             // While offered lines remain, the root decomposes into them (actions come below them):
             // given the choice, both models wrote actions at the root and never took a line.
             let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
@@ -527,6 +580,8 @@ impl Run<'_> {
                     Some(t) => t,
                     None => return Ok(End::Abandoned("random_steps")),
                 }
+            } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal)? {
+                "done".to_string()
             } else {
                 let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
                     st.replans += 1;
@@ -574,6 +629,9 @@ impl Run<'_> {
                 let r = self.execute(child, a)?;
                 let ran = r.is_ok();
                 st.executed(&child_text, a, r, &mut self.stats);
+                if ran {
+                    self.establish(&mut st);
+                }
                 if ran && completes(a) {
                     return Ok(End::Complete);
                 }
@@ -654,7 +712,14 @@ impl Run<'_> {
                         End::Complete => {
                             self.set_status(child, Status::Executed, "all its steps are done");
                             st.accepted += 1;
-                            st.previous = Some(format!("{child_text}: done"));
+                            // A target's own action ran last: what it changed is said here too.
+                            st.previous = Some(match (&target_child, self.change_report()) {
+                                (Some(_), Some(change)) => format!("{child_text}: done, {change}"),
+                                _ => format!("{child_text}: done"),
+                            });
+                            if target_child.is_some() {
+                                self.establish(&mut st);
+                            }
                             st.rejected = None;
                             if one_step {
                                 return Ok(End::Complete);
@@ -681,11 +746,29 @@ impl Run<'_> {
                     let r = self.execute(child, &a)?;
                     let ran = r.is_ok();
                     st.executed(&child_text, &a, r, &mut self.stats);
+                    if ran {
+                        self.establish(&mut st);
+                    }
                     if ran && completes(&a) {
                         return Ok(End::Complete);
                     }
                 }
             }
+        }
+    }
+
+    /// "now <fact>, …": what the last step changed, when changes are reported and it changed any.
+    fn change_report(&self) -> Option<String> {
+        let (_, now) = &self.last_change;
+        (self.cfg.report_changes && !now.is_empty()).then(|| format!("now {}", now.join(", ")))
+    }
+
+    /// Records in `st` what the step that just ran changed, but holding and closeness (means, not
+    /// ends: a grab is undone by the put it was for).
+    fn establish(&self, st: &mut NodeLoop) {
+        let (ids, now) = &self.last_change;
+        for f in now.iter().filter(|f| !f.contains(" is HOLDS_") && !f.contains(" is CLOSE to ")) {
+            st.established.push((ids.clone(), f.clone()));
         }
     }
 
@@ -709,6 +792,10 @@ impl Run<'_> {
         }
         self.check_global()?;
         self.stats.actions += 1;
+        // What the action changed among its objects, reported in the goal lines' words ("now fridge
+        // is OPEN"): the observation in full does not show a tiny model which line just came true.
+        let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+        let before = self.env.world().map(|w| w.facts_among(&ids));
         let outcome = self.env.execute(a).map_err(|e| {
             self.trace.event("exec_error", json!({"node": child, "action": a.to_string(), "error": e.to_string()}));
             StopCause::Error(format!("executing {a}: {e}"))
@@ -718,9 +805,15 @@ impl Run<'_> {
             Outcome::Ok { .. } | Outcome::Skipped { .. } => {
                 self.executed.push(a.clone());
                 self.set_status(child, Status::Executed, outcome.summary());
-                Ok(match &outcome {
-                    Outcome::Skipped { .. } => "ok (it already was so)".to_string(),
-                    Outcome::Ok { observation: Some(o) } => format!("ok, {o}"),
+                let now: Vec<String> = match (&before, self.env.world()) {
+                    (Some(before), Some(w)) => w.facts_among(&ids).into_iter().filter(|f| !before.contains(f)).collect(),
+                    _ => Vec::new(),
+                };
+                self.last_change = (ids, now);
+                Ok(match (&outcome, self.change_report()) {
+                    (Outcome::Skipped { .. }, _) => "ok (it already was so)".to_string(),
+                    (Outcome::Ok { observation: Some(o) }, _) => format!("ok, {o}"),
+                    (_, Some(change)) => format!("ok, {change}"),
                     _ => "ok".to_string(),
                 })
             }
@@ -814,6 +907,25 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
     } else {
         fresh
     }
+}
+
+/// Whether the state `after` a target's way holds a fact among the target's objects that does not
+/// hold now (closeness aside): a target that changes nothing (putting the apple back where it lies,
+/// by way of a grab) is no subgoal.
+fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
+    let ids: Vec<u32> = target.args.iter().map(|o| o.id).collect();
+    let before = now.facts_among(&ids);
+    after.facts_among(&ids).iter().any(|f| !f.contains(" is CLOSE to ") && !before.contains(f))
+}
+
+/// Whether running `a` now would make false a fact of `established` that still holds (tried on a
+/// copy of the world; an action that cannot run undoes nothing).
+fn undoes(w: &World, a: &Action, established: &[(Vec<u32>, String)]) -> bool {
+    let mut after = w.clone();
+    if after.execute(a).is_err() {
+        return false;
+    }
+    established.iter().any(|(ids, f)| w.facts_among(ids).contains(f) && !after.facts_among(ids).contains(f))
 }
 
 /// How many of the run's latest actions [`fresh_steps`] keeps from being chosen again.

@@ -16,6 +16,8 @@ struct Scripted {
     /// Scoring: this line is the likeliest (-0.1 a token), every other -1.0 a token.
     prefer: Option<String>,
     scored: Vec<Vec<String>>,
+    /// The probability it gives `done` as its answer's first word (the done check; 0: never).
+    p_done: f64,
 }
 
 impl Scripted {
@@ -26,6 +28,7 @@ impl Scripted {
             grammars: vec![],
             prefer: None,
             scored: vec![],
+            p_done: 0.0,
         }
     }
 }
@@ -68,6 +71,18 @@ impl Generate for Scripted {
 
     fn score(&mut self, _: &Prompt, continuations: &[String]) -> crate::llm::Result<crate::llm::engine::Scoring> {
         self.scored.push(continuations.to_vec());
+        if continuations.first().map(String::as_str) == Some("done") {
+            let rest = (1.0 - self.p_done) / (continuations.len() - 1) as f64;
+            let scores = continuations
+                .iter()
+                .enumerate()
+                .map(|(i, _)| crate::llm::engine::Score {
+                    logprob: (if i == 0 { self.p_done } else { rest }).max(1e-12).ln(),
+                    tokens: 1,
+                })
+                .collect();
+            return Ok(crate::llm::engine::Scoring { scores, prompt_tokens: 100, reused_tokens: 99, run_tokens: 2, ms: 1.0 });
+        }
         let scores = continuations
             .iter()
             .map(|c| {
@@ -86,7 +101,13 @@ const GRAB_APPLE: &str = "[GRAB] <apple> (12)";
 /// (the default asks it about subgoals only; `the_world_is_the_verdict_on_runnable_actions` tests that).
 /// Subgoals are free text here (target subgoals, the default, have their own tests below).
 fn cfg() -> PlannerConfig {
-    PlannerConfig { judge_actions: true, fresh_steps: false, target_subgoals: false, ..PlannerConfig::default() }
+    PlannerConfig { judge_actions: true, fresh_steps: false, target_subgoals: false, ..defaults() }
+}
+
+/// The defaults without the done check (its scoring call would be counted in every test's calls;
+/// `the_model_is_done_where_its_probability_of_done_reaches_the_threshold` tests it).
+fn defaults() -> PlannerConfig {
+    PlannerConfig { done_at: None, ..PlannerConfig::default() }
 }
 
 fn run_with(model: &mut Scripted, env: &mut dyn Env, cfg: &PlannerConfig) -> PlanOutcome {
@@ -470,6 +491,8 @@ fn config_round_trips_through_json() {
         strength: Strength::Typed,
         budgets: Budgets { max_depth: 2, deadline: Some(Duration::from_millis(1500)), ..Budgets::default() },
         symbolic_check: false,
+        done_at: Some(0.3),
+        protect_changes: false,
         ..cfg()
     };
     let back = PlannerConfig::from_json(&c.to_json()).unwrap();
@@ -479,7 +502,7 @@ fn config_round_trips_through_json() {
 #[test]
 fn the_world_is_the_verdict_on_runnable_actions() {
     // Default settings: a proposed action the symbolic check finds runnable runs without a verdict.
-    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &PlannerConfig::default());
+    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &defaults());
     assert_eq!(out.stop, StopCause::Done);
     assert_eq!(plan_lines(&out), [WALK_APPLE]);
     assert_eq!(out.stats.llm_calls, 2, "no termination call for the action");
@@ -497,7 +520,7 @@ fn a_subgoal_repeating_its_goal_is_rejected_unjudged_and_the_node_turns_to_actio
             "replan: congruence: not yet",
             "done",
         ],
-        &PlannerConfig { target_subgoals: false, ..PlannerConfig::default() },
+        &PlannerConfig { target_subgoals: false, ..defaults() },
     );
     assert_eq!(out.tree.node(1).status, Status::Replanned);
     assert!(m.grammars[0].contains("subgoal: "), "{}", m.grammars[0]);
@@ -509,14 +532,14 @@ fn a_subgoal_repeating_its_goal_is_rejected_unjudged_and_the_node_turns_to_actio
 
 #[test]
 fn no_walk_is_offered_right_after_a_walk_unless_nothing_else_is() {
-    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done"], &PlannerConfig::default());
+    let (out, m) = run(&[&format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done"], &defaults());
     assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE]);
     assert!(m.grammars[0].contains("\"[WALK] \""), "{}", m.grammars[0]);
     assert!(!m.grammars[1].contains("\"[WALK] \"") && m.grammars[1].contains("\"[GRAB] \""), "{}", m.grammars[1]);
     // Off: walks stay on offer.
     let (_, m) = run(
         &[&format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done"],
-        &PlannerConfig { fresh_steps: false, ..PlannerConfig::default() },
+        &PlannerConfig { fresh_steps: false, ..defaults() },
     );
     assert!(m.grammars[1].contains("\"[WALK] \""), "{}", m.grammars[1]);
 }
@@ -527,7 +550,7 @@ fn choosing_by_score_runs_the_likeliest_admitted_action_not_the_written_one() {
     let mut m = Scripted::new(&[&format!("action: {WALK_APPLE}"), "done"]);
     m.prefer = Some(format!("action: {walk_fridge}"));
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let c = PlannerConfig { choose: ActionChoice::Score, ..PlannerConfig::default() };
+    let c = PlannerConfig { choose: ActionChoice::Score, ..defaults() };
     let out = run_with(&mut m, &mut env, &c);
     assert_eq!(plan_lines(&out), [walk_fridge]);
     // Every candidate is an admitted action line, the written one among them.
@@ -571,13 +594,15 @@ fn offered(lines: &[&str]) -> PlanRequest {
 
 #[test]
 fn offered_subgoals_are_chosen_decomposed_without_a_verdict_and_end_the_root() {
+    let lines = [APPLE_IN_FRIDGE, "television is ON"];
     let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {WALK_APPLE}"), "done"]);
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &PlannerConfig::default(), &mut TraceWriter::sink());
-    // Three calls: the root's choice, the goal node's action, its `done`; no verdict, and no call
-    // for the root once its only offered line was taken.
+    // (a budget of three calls ends the run before the television's line)
+    let c = PlannerConfig { budgets: Budgets { max_llm_calls: 3, ..Budgets::default() }, ..defaults() };
+    let out = plan(&mut m, &mut env, &offered(&lines), &c, &mut TraceWriter::sink());
+    // The root's choice, the goal node's action, its `done`: no verdict.
     assert_eq!(m.prompts.len(), 3, "{:?}", m.prompts);
-    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(out.stop, StopCause::Budget("llm_calls"));
     assert_eq!(plan_lines(&out), [WALK_APPLE]);
     // The root's subgoal is one of the offered lines, not free text.
     assert!(m.grammars[0].contains(&format!("\"{APPLE_IN_FRIDGE}\"")), "{}", m.grammars[0]);
@@ -593,11 +618,12 @@ fn offered_subgoals_are_chosen_decomposed_without_a_verdict_and_end_the_root() {
 
 #[test]
 fn without_subgoal_focus_a_goal_node_may_name_any_object() {
-    let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {WALK_APPLE}"), "done"]);
+    // (the root's one line is taken without a call)
+    let mut m = Scripted::new(&[&format!("action: {WALK_APPLE}"), "done"]);
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let cfg = PlannerConfig { subgoal_focus: false, ..PlannerConfig::default() };
+    let cfg = PlannerConfig { subgoal_focus: false, ..defaults() };
     plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &cfg, &mut TraceWriter::sink());
-    assert!(admits(&m.grammars[1], "WALK", "<sofa> (30)"), "{}", m.grammars[1]);
+    assert!(admits(&m.grammars[0], "WALK", "<sofa> (30)"), "{}", m.grammars[0]);
 }
 
 #[test]
@@ -608,24 +634,24 @@ fn an_offered_line_is_taken_once_and_the_root_moves_to_the_next() {
         "action: [WALK] <television> (31)".to_string(),
         "action: [SWITCHON] <television> (31)".to_string(),
         "done".to_string(),
-        format!("subgoal: {APPLE_IN_FRIDGE}"),
+        // (the apple's line, the last, is taken without a call)
         format!("action: {WALK_APPLE}"),
         "done".to_string(),
     ];
     let mut m = Scripted::new(&answers.iter().map(String::as_str).collect::<Vec<_>>());
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE, tv]), &PlannerConfig::default(), &mut TraceWriter::sink());
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE, tv]), &defaults(), &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{}", m.grammars.last().unwrap());
-    assert!(!m.grammars[4].contains(&format!("\"{tv}\"")), "a taken line is not offered again: {}", m.grammars[4]);
+    assert_eq!(m.prompts.len(), 6, "a taken line is not offered again: the other is the root's only choice");
     // The television's node never offered the apple, and the apple's never the television.
     assert!(!admits(&m.grammars[1], "WALK", "<apple> (12)"), "{}", m.grammars[1]);
-    assert!(!admits(&m.grammars[5], "WALK", "<television> (31)"), "{}", m.grammars[5]);
+    assert!(!admits(&m.grammars[4], "WALK", "<television> (31)"), "{}", m.grammars[4]);
     assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)", WALK_APPLE]);
 }
 
 #[test]
 fn the_random_chooser_walks_the_offered_lines_with_a_fixed_number_of_steps_each() {
-    let cfg = |seed| PlannerConfig { kind: PlannerKind::Random, random_seed: seed, random_steps: 3, ..PlannerConfig::default() };
+    let cfg = |seed| PlannerConfig { kind: PlannerKind::Random, random_seed: seed, random_steps: 3, ..defaults() };
     let lines = [APPLE_IN_FRIDGE, "television is ON"];
     let go = |seed| {
         let mut env = SimEnv::new(World::demo(), vec![]);
@@ -671,7 +697,7 @@ fn named_objects_match_class_names_as_words_and_ids() {
 #[test]
 fn the_root_narrows_a_scene_wide_focus_to_what_the_instruction_names_and_keeps_a_given_one() {
     // Over the whole scene: the apple, the fridge and the counter the apple lies on.
-    let (_, m) = run(&["done"], &PlannerConfig::default());
+    let (_, m) = run(&["done"], &defaults());
     let g = &m.grammars[0];
     assert!(admits(g, "WALK", "<apple> (12)") && admits(g, "WALK", "<fridge> (10)"), "{g}");
     assert!(!admits(g, "WALK", "<sofa> (30)"), "{g}");
@@ -679,7 +705,7 @@ fn the_root_narrows_a_scene_wide_focus_to_what_the_instruction_names_and_keeps_a
     let mut m = Scripted::new(&["done"]);
     let mut env = SimEnv::new(World::demo(), vec![]);
     let req = PlanRequest::new("put the apple in the fridge", vec![10, 12, 30]);
-    plan(&mut m, &mut env, &req, &PlannerConfig::default(), &mut TraceWriter::sink());
+    plan(&mut m, &mut env, &req, &defaults(), &mut TraceWriter::sink());
     assert!(admits(&m.grammars[0], "WALK", "<sofa> (30)"), "{}", m.grammars[0]);
 }
 
@@ -687,7 +713,7 @@ const PUTIN: &str = "[PUTIN] <apple> (12) <fridge> (10)";
 
 #[test]
 fn an_action_that_cannot_run_yet_becomes_a_target_worked_out_by_the_world() {
-    let (out, m) = run(&[&format!("action: {PUTIN}"), "done"], &PlannerConfig::default());
+    let (out, m) = run(&[&format!("action: {PUTIN}"), "done"], &defaults());
     assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
     assert_eq!(
         plan_lines(&out),
@@ -707,7 +733,7 @@ fn an_action_that_cannot_run_yet_becomes_a_target_worked_out_by_the_world() {
 
 #[test]
 fn without_target_steps_the_model_chooses_the_steps_and_sees_what_is_missing() {
-    let c = PlannerConfig { target_steps: false, ..PlannerConfig::default() };
+    let c = PlannerConfig { target_steps: false, ..defaults() };
     let (out, m) = run(
         &[&format!("action: {PUTIN}"), &format!("action: {WALK_APPLE}"), &format!("action: {GRAB_APPLE}"), "done", "done"],
         &c,
@@ -722,12 +748,12 @@ fn without_target_steps_the_model_chooses_the_steps_and_sees_what_is_missing() {
 
 #[test]
 fn targets_are_not_offered_when_already_so_or_impossible_and_not_without_the_flag() {
-    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &PlannerConfig::default());
+    let (_, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &defaults());
     // The demo fridge is closed: CLOSE changes nothing; SIT on it is an affordance error.
     for (verb, obj) in [("CLOSE", "<fridge> (10)"), ("SIT", "<fridge> (10)")] {
         assert!(!admits(&m.grammars[0], verb, obj), "{verb} {obj} offered:\n{}", m.grammars[0]);
     }
-    let c = PlannerConfig { target_subgoals: false, ..PlannerConfig::default() };
+    let c = PlannerConfig { target_subgoals: false, ..defaults() };
     let (_, m) = run(&[&format!("action: {WALK_APPLE}"), "done"], &c);
     assert!(!m.grammars[0].contains("\"[PUTIN] \""), "{}", m.grammars[0]);
 }
@@ -735,24 +761,99 @@ fn targets_are_not_offered_when_already_so_or_impossible_and_not_without_the_fla
 #[test]
 fn with_single_step_lines_a_goal_line_is_complete_after_its_one_step() {
     let lines = [APPLE_IN_FRIDGE, "television is ON"];
-    let c = PlannerConfig { single_step_lines: true, ..PlannerConfig::default() };
+    let c = PlannerConfig { single_step_lines: true, ..defaults() };
     let mut m = Scripted::new(&[
         &format!("subgoal: {APPLE_IN_FRIDGE}"),
         &format!("action: {PUTIN}"),
-        "subgoal: television is ON",
         "action: [WALK] <television> (31)",
     ]);
     let mut env = SimEnv::new(World::demo(), vec![]);
     let out = plan(&mut m, &mut env, &offered(&lines), &c, &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
-    // No `done` was asked for: each line ended with its step (a target, then a plain action).
-    assert_eq!(m.prompts.len(), 4);
+    // No `done` was asked for: each line ended with its step (a target, then a plain action); the
+    // root's last line was its only choice.
+    assert_eq!(m.prompts.len(), 3);
     assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", PUTIN, "[WALK] <television> (31)"]);
     let root = out.tree.node(out.tree.root());
     assert!(root.children.iter().all(|&c| out.tree.node(c).status == Status::Executed));
     // Off (the default), the line goes on until the model says `done`.
-    let mut m = Scripted::new(&[&format!("subgoal: {APPLE_IN_FRIDGE}"), &format!("action: {PUTIN}"), "done"]);
+    let mut m = Scripted::new(&[&format!("action: {PUTIN}"), "done"]);
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &PlannerConfig::default(), &mut TraceWriter::sink());
-    assert_eq!((m.prompts.len(), out.stop), (3, StopCause::Done));
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &defaults(), &mut TraceWriter::sink());
+    assert_eq!((m.prompts.len(), out.stop), (2, StopCause::Done));
+}
+
+#[test]
+fn a_step_reports_what_it_changed_in_the_goal_lines_words() {
+    let tv = "television is ON";
+    // (the root's one line is taken without a call)
+    let answers = ["action: [SWITCHON] <television> (31)".to_string(), "done".to_string()];
+    let mut m = Scripted::new(&answers.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&[tv]), &defaults(), &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done);
+    // The demo television is off and out of reach: its target ran WALK, then SWITCHON.
+    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)"]);
+    assert!(
+        m.prompts[1].contains("Previous step: [SWITCHON] <television> (31): done, now television is ON"),
+        "{}",
+        m.prompts[1]
+    );
+    // Off, only the outcome.
+    let cfg = PlannerConfig { report_changes: false, ..defaults() };
+    let mut m = Scripted::new(&answers.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    plan(&mut m, &mut env, &offered(&[tv]), &cfg, &mut TraceWriter::sink());
+    assert!(m.prompts[1].contains("Previous step: [SWITCHON] <television> (31): done\n"), "{}", m.prompts[1]);
+}
+
+#[test]
+fn a_node_does_not_undo_what_its_own_steps_changed() {
+    let tv = "television is ON";
+    let answers = [
+        "action: [WALK] <television> (31)".to_string(),
+        "action: [SWITCHON] <television> (31)".to_string(),
+        "done".to_string(),
+    ];
+    let go = |cfg: &PlannerConfig| {
+        let mut m = Scripted::new(&answers.iter().map(String::as_str).collect::<Vec<_>>());
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        plan(&mut m, &mut env, &offered(&[tv]), cfg, &mut TraceWriter::sink());
+        m
+    };
+    let m = go(&defaults());
+    let after = &m.grammars[2];
+    assert!(!admits(after, "SWITCHOFF", "<television> (31)"), "SWITCHOFF undoes the node's SWITCHON: {after}");
+    assert!(admits(after, "TURNTO", "<television> (31)"), "other steps stay: {after}");
+    // Before the SWITCHON, and with the rule off, SWITCHOFF is a step like any other.
+    let m = go(&PlannerConfig { protect_changes: false, ..defaults() });
+    assert!(admits(&m.grammars[2], "SWITCHOFF", "<television> (31)"), "{}", m.grammars[2]);
+}
+
+#[test]
+fn the_model_is_done_where_its_probability_of_done_reaches_the_threshold() {
+    let tv = "television is ON";
+    let go = |p_done: f64, done_at: Option<f64>, script: &[&str]| {
+        let mut m = Scripted::new(script);
+        m.p_done = p_done;
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let cfg = PlannerConfig { done_at, ..PlannerConfig::default() };
+        let out = plan(&mut m, &mut env, &offered(&[tv, APPLE_IN_FRIDGE]), &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    let (tv_line, switch_on, walk) =
+        (format!("subgoal: {tv}"), "action: [SWITCHON] <television> (31)".to_string(), format!("action: {WALK_APPLE}"));
+    // p(done) 0.5 >= 0.2: once a line has a step, it is done without a generation; the root is never
+    // asked (a root shown goal lines is not done while one is left; the last line is its only choice).
+    let (out, m) = go(0.5, Some(0.2), &[&tv_line, &switch_on, &walk]);
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(m.scored, vec![vec!["done".to_string(), "action:".to_string()]; 2], "one check under each line");
+    assert_eq!(m.prompts.len(), 3);
+    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)", WALK_APPLE]);
+    // Below the threshold the generation decides (here `done` as well); with the check off there
+    // is no check.
+    let (out, m) = go(0.1, Some(0.2), &[&tv_line, &switch_on, "done", &walk, "done"]);
+    assert_eq!((out.stop, m.scored.len(), m.prompts.len()), (StopCause::Done, 2, 5));
+    let (out, m) = go(0.9, None, &[&tv_line, &switch_on, "done", &walk, "done"]);
+    assert_eq!((out.stop, m.scored.len(), m.prompts.len()), (StopCause::Done, 0, 5));
 }

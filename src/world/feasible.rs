@@ -47,17 +47,21 @@ impl World {
     /// running: a target whose way leads only to an affordance error (SIT on a fridge: walk there,
     /// then fail) or to nothing is not reachable.
     pub fn reaches(&self, target: &Action) -> bool {
+        self.after_way_to(target).is_some()
+    }
+
+    /// The state after following the way to `target` and running it, on a copy (`None`: see
+    /// [`World::reaches`]).
+    pub fn after_way_to(&self, target: &Action) -> Option<World> {
         let mut w = self.clone();
         for _ in 0..8 {
-            let Some(step) = w.first_step_towards(target) else { return false };
-            if w.execute(&step).is_err() {
-                return false;
-            }
+            let step = w.first_step_towards(target)?;
+            w.execute(&step).ok()?;
             if step == *target {
-                return true;
+                return Some(w);
             }
         }
-        false
+        None
     }
 
     /// The action a failure message names as the fix, when it names exactly one: the executor's

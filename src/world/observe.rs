@@ -166,6 +166,32 @@ impl World {
     }
 }
 
+impl World {
+    /// What holds among `ids` (the robot is always included), one fact a line in the words of a
+    /// task's goal lines: `<class> is <STATE>` and `<class> is <RELATION> to <class>`. The planner
+    /// reports what an action changed as the facts among its objects that hold after it and did not
+    /// before.
+    pub fn facts_among(&self, ids: &[u32]) -> Vec<String> {
+        let mut ix: Vec<Ix> = ids.iter().filter_map(|&id| self.ix(id)).collect();
+        ix.push(self.char_ix());
+        ix.sort_unstable();
+        ix.dedup();
+        let name = |i: Ix| self.view(i).class_name.to_string();
+        let mut out = Vec::new();
+        for &i in &ix {
+            for s in self.states_ix(i).iter() {
+                out.push(format!("{} is {}", name(i), s.name()));
+            }
+            for &(r, t) in self.out.get(i as usize).map(Vec::as_slice).unwrap_or(&[]) {
+                if ix.contains(&t) {
+                    out.push(format!("{} is {} to {}", name(i), r.name(), name(t)));
+                }
+            }
+        }
+        out
+    }
+}
+
 fn list(w: &World, xs: &[Ix]) -> String {
     let mut names: Vec<String> = xs.iter().take(LIST_MAX).map(|&x| w.label_ix(x)).collect();
     if xs.len() > LIST_MAX {
