@@ -184,6 +184,8 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
         forced_share.push(c.forced_tokens as f64 / c.tokens.len().max(1) as f64);
         masks.extend_from_slice(&c.timings.mask_us);
     }
+    crate::llm::mem::stage("after the runs");
+    crate::llm::mem::model("after the runs", engine.model());
     let plain = median(&mut per_tok_plain);
     let constrained = median(&mut per_tok_constrained);
     Ok(LlmBenchReport {

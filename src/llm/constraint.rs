@@ -23,11 +23,14 @@
 use std::collections::{HashMap, VecDeque};
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use llguidance::api::TopLevelGrammar;
-use llguidance::toktrie::{ApproximateTokEnv, InferenceCapabilities, SimpleVob, TokEnv};
+use llguidance::toktrie::{
+    ApproximateTokEnv, InferenceCapabilities, SimpleVob, TokEnv, TokTrie, TokenId, TokenizerEnv,
+};
 use llguidance::{Matcher, ParserFactory, TokenParser};
+use tokenizers::Tokenizer;
 use toktrie_hf_tokenizers::ByteTokenizer;
 
 use super::{LlmError, Result};
@@ -112,7 +115,7 @@ struct Cache {
 impl GrammarCompiler {
     /// `n_vocab` is the model's logits width (it may exceed the tokenizer's vocabulary: the extra ids
     /// are never allowed); `eos` the ids that end a generation, allowed only where the grammar can end.
-    pub fn new(tokenizer: &tokenizers::Tokenizer, n_vocab: usize, eos: &[u32]) -> Result<Self> {
+    pub fn new(tokenizer: Arc<Tokenizer>, n_vocab: usize, eos: &[u32]) -> Result<Self> {
         Self::with_slices(tokenizer, n_vocab, eos, &[])
     }
 
@@ -120,8 +123,10 @@ impl GrammarCompiler {
     /// class the caller's grammars use) for which llguidance precomputes token sets, so masks inside
     /// such text are cheap. Slices change speed, never which tokens are allowed. The runtime knows no
     /// grammar of its own; the caller passes the classes its grammars use.
+    /// The compiler keeps `tokenizer` (llguidance tokenizes some grammar text itself) rather than a
+    /// copy of it: pass the engine's own.
     pub fn with_slices(
-        tokenizer: &tokenizers::Tokenizer,
+        tokenizer: Arc<Tokenizer>,
         n_vocab: usize,
         eos: &[u32],
         slices: &[String],
@@ -146,15 +151,12 @@ impl GrammarCompiler {
             )));
         }
         // toktrie_hf_tokenizers asserts on a few malformed vocabularies; turn that into an error.
-        let tok_env: TokEnv = std::panic::catch_unwind(AssertUnwindSafe(|| -> anyhow::Result<TokEnv> {
-            let mut bt = ByteTokenizer::from_tokenizer(tokenizer.clone())?;
-            bt.set_eos_tokens(eos);
-            bt.into_tok_env(Some(n_vocab))
-        }))
-        .map_err(|_| {
-            LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into())
-        })?
-        .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
+        let build = AssertUnwindSafe(|| SharedTokEnv::build(tokenizer, n_vocab, eos));
+        let tok_env: TokEnv = std::panic::catch_unwind(build)
+            .map_err(|_| {
+                LlmError::Tokenizer("the tokenizer's vocabulary cannot be read as bytes (malformed byte tokens)".into())
+            })?
+            .map_err(|e| LlmError::Tokenizer(format!("cannot use this tokenizer for constrained decoding: {e:#}")))?;
         // Only the caller's slices, never llguidance's default JSON-string ones, which these grammars
         // do not use.
         let mut factory = ParserFactory::new(&tok_env, InferenceCapabilities::default(), slices)
@@ -229,6 +231,70 @@ impl GrammarCompiler {
             mask: None,
             tokens: Vec::new(),
         }
+    }
+}
+
+/// llguidance's view of the tokenizer: the token trie, and the engine's tokenizer for the text
+/// llguidance tokenizes itself. It is `toktrie_hf_tokenizers::ByteTokenizerEnv` without the copies
+/// that one keeps for its whole life, of the tokenizer and of every token's bytes (31 MB and 8 MB
+/// of Qwen2.5's peak memory); it builds the same trie and tokenizes the same way.
+struct SharedTokEnv {
+    tokenizer: Arc<Tokenizer>,
+    trie: TokTrie,
+}
+
+impl SharedTokEnv {
+    fn build(tokenizer: Arc<Tokenizer>, n_vocab: usize, eos: &[u32]) -> anyhow::Result<TokEnv> {
+        // ByteTokenizer works out each token's bytes, but only from a tokenizer of its own, which it
+        // may adjust (SentencePiece-style space handling); that copy lives only for this function.
+        let mut bt = ByteTokenizer::from_tokenizer((*tokenizer).clone())?;
+        bt.set_eos_tokens(eos);
+        let (mut info, eos, mut bytes) = (bt.tokrx_info(), bt.eos_tokens(), bt.token_bytes());
+        // Where it did adjust the text handling (not byte-level BPE, which has none of that), keep
+        // its tokenizer, as ByteTokenizerEnv would.
+        let tokenizer =
+            if same_text_handling(&bt.hf_tokenizer, &tokenizer) { tokenizer } else { Arc::new(bt.hf_tokenizer) };
+        // From here on as ByteTokenizerEnv::new: the logits past the vocabulary are named special
+        // tokens (never allowed), and every eos id ends the grammar.
+        while bytes.len() < n_vocab {
+            let mut name = format!(".<[{}]>", bytes.len()).into_bytes();
+            name[0] = TokTrie::SPECIAL_TOKEN_MARKER;
+            bytes.push(name);
+        }
+        info.vocab_size = n_vocab as u32;
+        let mut trie = TokTrie::from(&info, &bytes);
+        if eos.len() > 1 {
+            trie = trie.with_eos_tokens(&eos);
+        }
+        Ok(Arc::new(SharedTokEnv { tokenizer, trie }))
+    }
+
+    fn encode(&self, s: &str) -> Vec<TokenId> {
+        // As ByteTokenizerEnv: llguidance hands over text the tokenizer accepts.
+        self.tokenizer.encode(s, false).expect("tokenizer error").get_ids().to_vec()
+    }
+}
+
+/// Whether two tokenizers normalise and split text alike (their vocabularies are the same).
+fn same_text_handling(a: &Tokenizer, b: &Tokenizer) -> bool {
+    let json = |t: &Tokenizer| {
+        (serde_json::to_string(&t.get_normalizer()).ok(), serde_json::to_string(&t.get_pre_tokenizer()).ok())
+    };
+    let (ja, jb) = (json(a), json(b));
+    ja.0.is_some() && ja.1.is_some() && ja == jb
+}
+
+impl TokenizerEnv for SharedTokEnv {
+    fn tok_trie(&self) -> &TokTrie {
+        &self.trie
+    }
+
+    fn tokenize_bytes(&self, s: &[u8]) -> Vec<TokenId> {
+        self.trie.tokenize_with_greedy_fallback(s, |s| self.encode(s))
+    }
+
+    fn tokenize_bytes_special(&self, s: &[u8]) -> Vec<TokenId> {
+        self.trie.tokenize_with_greedy_fallback(s, |s| self.trie.tokenize_with_special(s, |s| self.encode(s)))
     }
 }
 

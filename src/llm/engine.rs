@@ -14,7 +14,7 @@ use serde::Serialize;
 use super::chat::{ChatTemplate, Message};
 use super::constraint::GrammarCompiler;
 use super::gguf::GgufFile;
-use super::model::Transformer;
+use super::model::{ModelConfig, Transformer};
 use super::sample::{Sampler, Sampling};
 use super::tokenizer::GgufTokenizer;
 use super::{LlmError, Result};
@@ -182,13 +182,22 @@ impl Engine {
     /// passes `grammar::TEXT_SLICE`) so masks inside free text stay cheap.
     pub fn load_with_slices(path: &Path, slices: &[String]) -> Result<Self> {
         let t0 = Instant::now();
-        let gguf = GgufFile::open(path)?;
+        super::mem::stage("start");
+        let mut gguf = GgufFile::open(path)?;
+        super::mem::stage("gguf header");
         let tokenizer = GgufTokenizer::from_gguf(&gguf)?;
+        super::mem::stage("tokenizer");
         // A model without a chat template can still run raw text prompts.
         let template = ChatTemplate::from_gguf(&gguf).ok();
-        let model = Transformer::load(&gguf)?;
+        // Everything built from the tokenizer's metadata comes before the weights: its temporary
+        // copies, and the metadata itself, are freed before the weights add the file's size.
+        let n_vocab = ModelConfig::from_gguf(&gguf)?.n_vocab;
         let grammars =
-            GrammarCompiler::with_slices(tokenizer.tokenizer(), model.config().n_vocab, tokenizer.eos_ids(), slices)?;
+            GrammarCompiler::with_slices(tokenizer.shared_tokenizer().clone(), n_vocab, tokenizer.eos_ids(), slices)?;
+        super::mem::stage("grammar compiler");
+        gguf.drop_tokenizer_metadata();
+        let model = Transformer::load(&gguf)?;
+        super::mem::stage("weights");
         Ok(Self {
             path: path.to_path_buf(),
             model,

@@ -15,6 +15,7 @@ pub mod error;
 pub mod gguf;
 pub mod kernels;
 pub mod locate;
+pub mod mem;
 pub mod model;
 pub mod sample;
 /// Test support (the `test-support` feature, on for this crate's own tests and benches only).

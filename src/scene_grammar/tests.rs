@@ -310,7 +310,7 @@ fn real_vocab_walks(file: &'static str, walks: u64) {
     let n_vocab = tok.vocab_size();
     let t0 = std::time::Instant::now();
     let slices = [crate::grammar::TEXT_SLICE.to_string()];
-    let c = GrammarCompiler::with_slices(tok.tokenizer(), n_vocab, tok.eos_ids(), &slices).unwrap();
+    let c = GrammarCompiler::with_slices(tok.shared_tokenizer().clone(), n_vocab, tok.eos_ids(), &slices).unwrap();
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bytes = |t: u32| tok.token_bytes(t).unwrap_or_default();
     // The walks check EOS against one id; the compiler gets all of the model's EOS ids.

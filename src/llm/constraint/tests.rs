@@ -68,9 +68,9 @@ fn build_test_tokenizer() -> Tokenizer {
     tok
 }
 
-pub(crate) fn test_tokenizer() -> &'static Tokenizer {
-    static TOK: OnceLock<Tokenizer> = OnceLock::new();
-    TOK.get_or_init(build_test_tokenizer)
+pub(crate) fn test_tokenizer() -> &'static Arc<Tokenizer> {
+    static TOK: OnceLock<Arc<Tokenizer>> = OnceLock::new();
+    TOK.get_or_init(|| Arc::new(build_test_tokenizer()))
 }
 
 pub(crate) fn compiler() -> &'static GrammarCompiler {
@@ -80,7 +80,7 @@ pub(crate) fn compiler() -> &'static GrammarCompiler {
         // Pad the logits width past the vocabulary, as real models do.
         // One slice for a free-text class, so the sliced mask path is exercised too.
         let slices = [TEST_TEXT_SLICE.to_string()];
-        GrammarCompiler::with_slices(tok, tok.get_vocab_size(true) + 5, &[EOS], &slices).expect("test compiler")
+        GrammarCompiler::with_slices(tok.clone(), tok.get_vocab_size(true) + 5, &[EOS], &slices).expect("test compiler")
     })
 }
 
@@ -238,7 +238,7 @@ fn constraint_is_send_and_compiler_is_sync() {
 #[test]
 fn cache_compiles_once_and_hands_out_independent_constraints() {
     let tok = test_tokenizer();
-    let c = GrammarCompiler::new(tok, tok.get_vocab_size(true), &[EOS]).unwrap();
+    let c = GrammarCompiler::new(tok.clone(), tok.get_vocab_size(true), &[EOS]).unwrap();
     let g = r#"start: "[WALK] " ("<apple> (1)" | "<fridge> (2)")"#;
     let mut a = c.compile(g).unwrap();
     assert_eq!(c.cache_stats(), (1, 0));
@@ -294,7 +294,7 @@ fn grammars_this_vocabulary_cannot_produce_are_errors() {
                   "vocab": {"a": 0, "b": 1, "<|im_end|>": 2}, "merges": []}
     }"#;
     let tok: Tokenizer = json.parse().unwrap();
-    let c = GrammarCompiler::new(&tok, 3, &[2]).unwrap();
+    let c = GrammarCompiler::new(Arc::new(tok), 3, &[2]).unwrap();
 
     let e = c.compile(r#"start: "z""#).err().unwrap().to_string();
     assert!(e.contains("cannot be satisfied"), "{e}");
@@ -400,9 +400,9 @@ fn padded_logits_width_and_bad_eos_are_handled() {
     let m = k.mask().unwrap();
     assert_eq!(m.len(), v + 5);
     assert!((v as u32..(v + 5) as u32).all(|t| !m.is_allowed(t)), "padding ids are never allowed");
-    assert!(GrammarCompiler::new(tok, v - 1, &[EOS]).err().unwrap().to_string().contains("smaller than"));
-    assert!(GrammarCompiler::new(tok, v, &[]).err().unwrap().to_string().contains("no end-of-sequence"));
-    assert!(GrammarCompiler::new(tok, v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
+    assert!(GrammarCompiler::new(tok.clone(), v - 1, &[EOS]).err().unwrap().to_string().contains("smaller than"));
+    assert!(GrammarCompiler::new(tok.clone(), v, &[]).err().unwrap().to_string().contains("no end-of-sequence"));
+    assert!(GrammarCompiler::new(tok.clone(), v + 5, &[v as u32]).err().unwrap().to_string().contains("outside"));
 }
 
 /// Grammar problems the parser would only meet mid-generation are found without a model, in words
@@ -419,4 +419,41 @@ fn check_grammar_finds_limits_before_any_model_loads() {
     let piped: Vec<String> = (0..2100).map(|i| format!("a|{i}")).collect();
     check_grammar(&format!("start: \"{}\" | /x|y/\n", piped.join(""))).unwrap();
     check_grammar("start: line+\nline: (\"[WALK] <fridge> (5)\" | \"[OPEN] <fridge> (5)\") \"\\n\"\n").unwrap();
+}
+
+/// The compiler's token environment (sharing the engine's tokenizer) is the one
+/// `toktrie_hf_tokenizers` builds: the same bytes for every id (padding included), the same eos
+/// ids, the same tokenization of text with and without special tokens. On the test vocabulary and
+/// on both real ones where installed.
+#[test]
+fn shared_token_env_equals_byte_tokenizer_env() {
+    use crate::llm::gguf::test_models::{real_tokenizer, QWEN, SMOLLM2};
+    let mut cases = vec![(test_tokenizer().clone(), vec![EOS])];
+    for file in [SMOLLM2, QWEN] {
+        if let Some(t) = real_tokenizer(file) {
+            cases.push((t.shared_tokenizer().clone(), t.eos_ids().to_vec()));
+        }
+    }
+    let texts: [&[u8]; 4] = [
+        b"[WALK] <apple> (12)\n",
+        "caf\u{e9} 123 \u{1f600} x".as_bytes(),
+        b"<|im_start|>user\nhi<|im_end|>",
+        b"\xff<|im_end|>a",
+    ];
+    for (tok, eos) in cases {
+        let n_vocab = tok.get_vocab_size(true) + 3;
+        let ours = SharedTokEnv::build(tok.clone(), n_vocab, &eos).unwrap();
+        let mut bt = ByteTokenizer::from_tokenizer((*tok).clone()).unwrap();
+        bt.set_eos_tokens(&eos);
+        let theirs = bt.into_tok_env(Some(n_vocab)).unwrap();
+        let (a, b) = (ours.tok_trie(), theirs.tok_trie());
+        assert_eq!(a.vocab_size(), b.vocab_size());
+        assert_eq!((a.eos_token(), a.eos_tokens()), (b.eos_token(), b.eos_tokens()));
+        assert!((0..n_vocab as u32).all(|t| a.token(t) == b.token(t)), "token bytes differ");
+        for s in texts {
+            assert_eq!(ours.tokenize_bytes(s), theirs.tokenize_bytes(s), "{s:?}");
+            assert_eq!(ours.tokenize_bytes_special(s), theirs.tokenize_bytes_special(s), "{s:?}");
+            assert_eq!(ours.tokenize_bytes_marker(s), theirs.tokenize_bytes_marker(s), "{s:?}");
+        }
+    }
 }

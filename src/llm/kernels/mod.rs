@@ -127,6 +127,14 @@ impl Q8Acts {
         }
     }
 
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.blocks.capacity() * size_of::<Q8Block>()
+            + self.pairs.capacity() * size_of::<PairBlock>()
+            + self.sums.capacity() * 4
+    }
+
     /// The pair blocks of tokens `2p` and `2p + 1`.
     pub fn pair(&self, p: usize) -> &[PairBlock] {
         &self.pairs[p * self.nb..(p + 1) * self.nb]
@@ -278,6 +286,14 @@ impl QMatrix {
 
     pub fn rows(&self) -> usize {
         self.rows
+    }
+
+    /// Bytes of weights held.
+    pub fn bytes(&self) -> usize {
+        match &self.storage {
+            Storage::Quant { data, .. } => data.capacity(),
+            Storage::F32(w) => w.capacity() * 4,
+        }
     }
 
     pub fn cols(&self) -> usize {
