@@ -292,7 +292,7 @@ impl std::str::FromStr for ActionChoice {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
 #[serde(tag = "stop", content = "detail", rename_all = "snake_case")]
 pub enum StopCause {
-    /// The model said `done` at the root.
+    /// The root is complete: the model said `done` there, or (goal lines offered) every line was taken.
     Done,
     /// A budget ran out: which one (`depth`, `children`, `replans`, `llm_calls`, `actions`, `deadline`).
     Budget(&'static str),
@@ -305,7 +305,7 @@ pub enum StopCause {
 impl std::fmt::Display for StopCause {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            StopCause::Done => f.write_str("done (the model said so at the root)"),
+            StopCause::Done => f.write_str("done (the root is complete: `done` there, or every offered goal line taken)"),
             StopCause::Budget(b) => write!(f, "budget: {b}"),
             StopCause::Oracle => f.write_str("oracle goal check (diagnostic)"),
             StopCause::Error(e) => write!(f, "error: {e}"),

@@ -171,7 +171,9 @@ pub(crate) fn run_tree(
     run.set_status(root, Status::Decomposing, "the instruction");
     let stop = match run.expand(root, None) {
         Ok(End::Complete) => {
-            run.set_status(root, Status::Executed, "the model said done");
+            let lines = !req.subgoals.is_empty() && run.mode != ContextMode::NoSubgoalTree;
+            let why = if lines { "every offered goal line was taken" } else { "the model said done" };
+            run.set_status(root, Status::Executed, why);
             StopCause::Done
         }
         Ok(End::Abandoned(budget)) => {
@@ -561,9 +563,9 @@ impl Run<'_> {
             // has been accepted, once every offered subgoal was taken, or when nothing else can be
             // written.
             // (a target node with target steps ends when its action runs, not when the model says so)
-            // A root shown goal lines is decomposed into them: it is not done while one is left.
+            // A root shown goal lines is decomposed into them: it is not done while one is left to take.
             let allow_done = !(target.is_some() && self.cfg.target_steps)
-                && !(offered && !subgoal_menu.is_empty())
+                && !(offered && allow_subgoal)
                 && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()));
             // While offered lines remain, the root decomposes into them (actions come below them):
             // given the choice, both models wrote actions at the root and never took a line.

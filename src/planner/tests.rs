@@ -857,3 +857,14 @@ fn the_model_is_done_where_its_probability_of_done_reaches_the_threshold() {
     let (out, m) = go(0.9, None, &[&tv_line, &switch_on, "done", &walk, "done"]);
     assert_eq!((out.stop, m.scored.len(), m.prompts.len()), (StopCause::Done, 0, 5));
 }
+
+#[test]
+fn without_the_subgoal_tree_the_root_shown_goal_lines_acts_and_may_say_done() {
+    let cfg = PlannerConfig { kind: PlannerKind::NoSubgoalTree, ..defaults() };
+    let mut m = Scripted::new(&[&format!("action: {WALK_APPLE}"), "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE, "television is ON"]), &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{}", m.grammars.last().unwrap());
+    assert!(m.grammars[1].contains("\"done\"") && !m.grammars[1].contains("subgoal"), "{}", m.grammars[1]);
+    assert_eq!(out.tree.node(out.tree.root()).status, Status::Executed);
+}
