@@ -248,3 +248,12 @@ fn help_documents_the_task_file_schema_context_and_exit_codes() {
     let top = stdout(&run(&["--help"]));
     assert!(top.contains("Exit codes"), "{top}");
 }
+
+#[test]
+fn done_at_must_be_a_probability() {
+    for bad in ["0", "1.5", "abc"] {
+        let o = run(&["plan", "put the apple in the fridge", "--done-at", bad]);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--done-at") && stderr(&o).contains("0.2"), "{}", stderr(&o));
+    }
+}

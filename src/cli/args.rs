@@ -159,11 +159,22 @@ pub struct DecisionArgs {
     pub no_protect: bool,
     /// Where `done` may be answered, the model is done when its probability of `done` as the
     /// answer's first word (against `action:` and `subgoal:`) is at least P.
-    #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT)]
+    #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT, value_parser = probability)]
     pub done_at: f64,
     /// Take `done` only when greedy decoding writes it (no look at its probability).
     #[arg(long)]
     pub no_done_check: bool,
+}
+
+/// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
+/// `--no-done-check` for that).
+fn probability(s: &str) -> Result<f64, String> {
+    let p: f64 = s.parse().map_err(|_| format!("{s:?} is not a number: give a probability such as 0.2"))?;
+    if p > 0.0 && p <= 1.0 {
+        Ok(p)
+    } else {
+        Err(format!("{s} is not in (0, 1]: give a probability such as 0.2, or --no-done-check to turn the check off"))
+    }
 }
 
 impl DecisionArgs {
