@@ -28,7 +28,7 @@ use crate::scene_grammar::typed_actions;
 use crate::llm::engine::{Generate, Prompt, Score, StopReason};
 use crate::llm::LlmError;
 use crate::world::vocab::Relation;
-use crate::world::World;
+use crate::world::{Fact, World};
 
 /// How the context of each decision is made (the paper's ablations).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -81,9 +81,9 @@ struct NodeLoop {
     /// Actions the run had executed when this node's expansion began (the random chooser counts
     /// the steps taken below a node from it).
     start_actions: usize,
-    /// What this node's steps changed (the objects, the fact), kept from being undone by its later
-    /// steps (see `PlannerConfig::protect_changes`).
-    established: Vec<(Vec<u32>, String)>,
+    /// What this node's steps changed, kept from being undone by its later steps (see
+    /// `PlannerConfig::protect_changes`).
+    established: Vec<Fact>,
 }
 
 impl NodeLoop {
@@ -127,9 +127,9 @@ pub(crate) struct Run<'a> {
     rng: Option<StdRng>,
     /// `focus` is every object of the scene (nothing narrowed it), so the root narrows it itself.
     focus_is_scene: bool,
-    /// What the last executed action changed among its objects (its object ids, and the facts that
-    /// hold after it and did not before, in the goal lines' words).
-    last_change: (Vec<u32>, Vec<String>),
+    /// What the last executed action changed among its objects: the facts that hold after it and
+    /// did not before.
+    last_change: Vec<Fact>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -151,7 +151,7 @@ pub(crate) fn run_tree(
     });
     let mut run = Run {
         focus_is_scene,
-        last_change: (Vec::new(), Vec::new()),
+        last_change: Vec::new(),
         model,
         env,
         req,
@@ -368,15 +368,19 @@ impl Run<'_> {
                 "{role} call at node {node}: the model's context filled before the answer was complete"
             )));
         }
-        let rec = CallRecord::of(role, node, hash, &g, total_ms);
+        self.record(CallRecord::of(role, node, hash, &g, total_ms));
+        Ok(Some(g.text))
+    }
+
+    /// Counts a model call's tokens, traces it and files it under its node.
+    fn record(&mut self, rec: CallRecord) {
         self.stats.prompt_tokens += rec.prompt_tokens;
         self.stats.reused_tokens += rec.reused_tokens;
         self.stats.output_tokens += rec.output_tokens;
         self.stats.forced_tokens += rec.forced_tokens;
         self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
-        self.tree.add_call(node, self.stats.calls.len());
+        self.tree.add_call(rec.node, self.stats.calls.len());
         self.stats.calls.push(rec);
-        Ok(Some(g.text))
     }
 
     /// Whether the model is done at `node` by its own probability of `done` as its answer's first
@@ -404,14 +408,8 @@ impl Run<'_> {
         let odds: Vec<f64> = scoring.scores.iter().map(|s| s.logprob.exp()).collect();
         let p = odds[0] / odds.iter().sum::<f64>().max(f64::MIN_POSITIVE);
         let done = p >= at;
-        let rec = CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms);
-        self.stats.prompt_tokens += rec.prompt_tokens;
-        self.stats.reused_tokens += rec.reused_tokens;
-        self.stats.output_tokens += rec.output_tokens;
-        self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
+        self.record(CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms));
         self.trace.event("done_check", json!({"node": node, "p_done": (p * 1000.0).round() / 1000.0, "done": done}));
-        self.tree.add_call(node, self.stats.calls.len());
-        self.stats.calls.push(rec);
         Ok(done)
     }
 
@@ -440,17 +438,11 @@ impl Run<'_> {
                 best = i;
             }
         }
-        let rec = CallRecord::of_scoring(node, hash, &scoring, &lines[best], total_ms);
-        self.stats.prompt_tokens += rec.prompt_tokens;
-        self.stats.reused_tokens += rec.reused_tokens;
-        self.stats.output_tokens += rec.output_tokens;
+        self.record(CallRecord::of_scoring(node, hash, &scoring, &lines[best], total_ms));
         let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(Score::mean).zip(lines.iter().map(String::as_str)).collect();
         top.sort_by(|a, b| b.0.total_cmp(&a.0));
-        self.trace.event("call", serde_json::to_value(&rec).unwrap_or_default());
         self.trace.event("scores", json!({"node": node, "written": format!("action: {written}"),
             "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
-        self.tree.add_call(node, self.stats.calls.len());
-        self.stats.calls.push(rec);
         Ok(list[best].clone())
     }
 
@@ -759,19 +751,19 @@ impl Run<'_> {
         }
     }
 
-    /// "now <fact>, …": what the last step changed, when changes are reported and it changed any.
+    /// "now <fact>, …": what the last step changed, in the goal lines' words, when changes are
+    /// reported and it changed any.
     fn change_report(&self) -> Option<String> {
-        let (_, now) = &self.last_change;
-        (self.cfg.report_changes && !now.is_empty()).then(|| format!("now {}", now.join(", ")))
+        let w = self.env.world().filter(|_| self.cfg.report_changes && !self.last_change.is_empty())?;
+        let facts: Vec<String> = self.last_change.iter().map(|f| w.describe(f)).collect();
+        Some(format!("now {}", facts.join(", ")))
     }
 
     /// Records in `st` what the step that just ran changed, but holding and closeness (means, not
     /// ends: a grab is undone by the put it was for).
     fn establish(&self, st: &mut NodeLoop) {
-        let (ids, now) = &self.last_change;
-        for f in now.iter().filter(|f| !f.contains(" is HOLDS_") && !f.contains(" is CLOSE to ")) {
-            st.established.push((ids.clone(), f.clone()));
-        }
+        let means = |f: &Fact| is_edge(f, &[Relation::HoldsRh, Relation::HoldsLh, Relation::Close]);
+        st.established.extend(self.last_change.iter().filter(|f| !means(f)).cloned());
     }
 
     /// The symbolic check, then the executor. `Ok(Ok(summary))`: executed; `Ok(Err(reason))`: the
@@ -807,11 +799,10 @@ impl Run<'_> {
             Outcome::Ok { .. } | Outcome::Skipped { .. } => {
                 self.executed.push(a.clone());
                 self.set_status(child, Status::Executed, outcome.summary());
-                let now: Vec<String> = match (&before, self.env.world()) {
+                self.last_change = match (&before, self.env.world()) {
                     (Some(before), Some(w)) => w.facts_among(&ids).into_iter().filter(|f| !before.contains(f)).collect(),
                     _ => Vec::new(),
                 };
-                self.last_change = (ids, now);
                 Ok(match (&outcome, self.change_report()) {
                     (Outcome::Skipped { .. }, _) => "ok (it already was so)".to_string(),
                     (Outcome::Ok { observation: Some(o) }, _) => format!("ok, {o}"),
@@ -916,18 +907,22 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
 /// by way of a grab) is no subgoal.
 fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     let ids: Vec<u32> = target.args.iter().map(|o| o.id).collect();
-    let before = now.facts_among(&ids);
-    after.facts_among(&ids).iter().any(|f| !f.contains(" is CLOSE to ") && !before.contains(f))
+    after.facts_among(&ids).iter().any(|f| !is_edge(f, &[Relation::Close]) && !now.holds(f))
 }
 
 /// Whether running `a` now would make false a fact of `established` that still holds (tried on a
 /// copy of the world; an action that cannot run undoes nothing).
-fn undoes(w: &World, a: &Action, established: &[(Vec<u32>, String)]) -> bool {
+fn undoes(w: &World, a: &Action, established: &[Fact]) -> bool {
     let mut after = w.clone();
     if after.execute(a).is_err() {
         return false;
     }
-    established.iter().any(|(ids, f)| w.facts_among(ids).contains(f) && !after.facts_among(ids).contains(f))
+    established.iter().any(|f| w.holds(f) && !after.holds(f))
+}
+
+/// Whether `f` is an edge of one of these relations.
+fn is_edge(f: &Fact, relations: &[Relation]) -> bool {
+    matches!(f, Fact::Edge { relation, .. } if relations.contains(relation))
 }
 
 /// How many of the run's latest actions [`fresh_steps`] keeps from being chosen again.

@@ -9,6 +9,7 @@ use std::fmt::Write;
 
 use serde::Serialize;
 
+use super::exec::Fact;
 use super::state::{Ix, World};
 use super::vocab::{Property, Relation, State};
 
@@ -167,28 +168,49 @@ impl World {
 }
 
 impl World {
-    /// What holds among `ids` (the robot is always included), one fact a line in the words of a
-    /// task's goal lines: `<class> is <STATE>` and `<class> is <RELATION> to <class>`. The planner
-    /// reports what an action changed as the facts among its objects that hold after it and did not
-    /// before.
-    pub fn facts_among(&self, ids: &[u32]) -> Vec<String> {
+    /// What holds among `ids` (the robot is always included): their states, and the edges between
+    /// them, as [`Fact::State`] and [`Fact::Edge`]. The planner reports what an action changed as
+    /// the facts among its objects that hold after it and did not before ([`World::describe`] words
+    /// them).
+    pub fn facts_among(&self, ids: &[u32]) -> Vec<Fact> {
         let mut ix: Vec<Ix> = ids.iter().filter_map(|&id| self.ix(id)).collect();
         ix.push(self.char_ix());
         ix.sort_unstable();
         ix.dedup();
-        let name = |i: Ix| self.view(i).class_name.to_string();
         let mut out = Vec::new();
         for &i in &ix {
-            for s in self.states_ix(i).iter() {
-                out.push(format!("{} is {}", name(i), s.name()));
-            }
-            for &(r, t) in self.out.get(i as usize).map(Vec::as_slice).unwrap_or(&[]) {
+            let id = self.id(i);
+            out.extend(self.states_ix(i).iter().map(|state| Fact::State { id, state }));
+            for &(relation, t) in self.out.get(i as usize).map(Vec::as_slice).unwrap_or(&[]) {
                 if ix.contains(&t) {
-                    out.push(format!("{} is {} to {}", name(i), r.name(), name(t)));
+                    out.push(Fact::Edge { from: id, relation, to: self.id(t) });
                 }
             }
         }
         out
+    }
+
+    /// Whether `fact` holds now.
+    pub fn holds(&self, fact: &Fact) -> bool {
+        match *fact {
+            Fact::Edge { from, relation, to } => self.has_edge(from, relation, to),
+            Fact::Holds { from, to } => [Relation::HoldsRh, Relation::HoldsLh]
+                .iter()
+                .any(|&h| self.related(from, h).iter().any(|&x| to.is_none_or(|t| t == x))),
+            Fact::State { id, state } => self.node(id).is_some_and(|n| n.states.contains(state)),
+        }
+    }
+
+    /// `fact` in the words of a task's goal lines: `<class> is <STATE>`, `<class> is <RELATION> to
+    /// <class>`.
+    pub fn describe(&self, fact: &Fact) -> String {
+        let name = |id: u32| self.node(id).map_or_else(|| format!("({id})"), |n| n.class_name.to_string());
+        match *fact {
+            Fact::Edge { from, relation, to } => format!("{} is {} to {}", name(from), relation.name(), name(to)),
+            Fact::Holds { from, to: Some(to) } => format!("{} holds {}", name(from), name(to)),
+            Fact::Holds { from, to: None } => format!("{} holds something", name(from)),
+            Fact::State { id, state } => format!("{} is {}", name(id), state.name()),
+        }
     }
 }
 
@@ -227,6 +249,26 @@ fn bounded(lines: Vec<String>, budget: usize) -> String {
 mod tests {
     use super::*;
     use crate::action::{Action, ObjRef, Verb};
+
+    #[test]
+    fn facts_among_objects_hold_and_are_worded_as_goal_lines() {
+        let mut w = World::demo();
+        let (fridge, apple) = (10, 12);
+        let facts = w.facts_among(&[fridge, apple]);
+        let closed = Fact::State { id: fridge, state: State::Closed };
+        assert!(facts.contains(&closed), "{facts:?}");
+        assert!(facts.iter().all(|f| w.holds(f)));
+        assert_eq!(w.describe(&closed), "fridge is CLOSED");
+        // Edges only between the given objects and the robot (the apple lies on the counter, not given).
+        assert!(!facts.iter().any(|f| matches!(f, Fact::Edge { to: 11, .. })), "{facts:?}");
+        w.execute(&a(Verb::Walk, &[("fridge", fridge)])).unwrap();
+        w.execute(&a(Verb::Open, &[("fridge", fridge)])).unwrap();
+        assert!(!w.holds(&closed) && w.holds(&Fact::State { id: fridge, state: State::Open }));
+        let close = Fact::Edge { from: w.character(), relation: Relation::Close, to: fridge };
+        assert!(w.facts_among(&[fridge]).contains(&close));
+        assert_eq!(w.describe(&close), "character is CLOSE to fridge");
+        assert!(!w.holds(&Fact::Holds { from: w.character(), to: None }));
+    }
 
     fn a(verb: Verb, args: &[(&str, u32)]) -> Action {
         Action::new(verb, args.iter().map(|&(c, i)| ObjRef::new(c, i)).collect()).unwrap()
