@@ -9,8 +9,8 @@
 //! cannot hide a slow grammar. The plain run decodes `decode_tokens`, the constrained one what the
 //! grammar allows (about 100 tokens here); the few extra positions barely change a token's cost.
 //!
-//! Each figure is the median of `runs` repetitions. With `busy_neighbour` a second process keeps every
-//! core busy while we measure, the situation of a robot whose CPU is shared.
+//! Each figure is the median of `runs` repetitions. With `--busy-neighbour` other processes keep cores
+//! busy while we measure, the situation of a robot whose CPU is shared.
 
 use std::time::Instant;
 

@@ -257,3 +257,18 @@ fn done_at_must_be_a_probability() {
         assert!(stderr(&o).contains("--done-at") && stderr(&o).contains("0.2"), "{}", stderr(&o));
     }
 }
+
+#[test]
+fn bench_llm_busy_neighbour_takes_a_count_or_all() {
+    for bad in ["0", "two", "65"] {
+        let o = run(&["bench", "llm", "--busy-neighbour", bad, "--model", "/nonexistent.gguf"]);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(stderr(&o).contains("neighbour count") && stderr(&o).contains("`all`"), "{bad}: {}", stderr(&o));
+    }
+    // A count, `all`, or no value parse (and the run then stops at the missing model, before any
+    // neighbour starts).
+    for good in [&["--busy-neighbour", "2"][..], &["--busy-neighbour", "all"], &["--busy-neighbour"]] {
+        let o = run(&[&["bench", "llm", "--model", "/nonexistent.gguf"][..], good].concat());
+        assert!(stderr(&o).contains("model not found"), "{good:?}: {}", stderr(&o));
+    }
+}

@@ -157,6 +157,11 @@ pub struct DecisionArgs {
     /// SWITCHOFF after the node's SWITCHON, is not offered; holding and closeness excepted).
     #[arg(long)]
     pub no_protect: bool,
+    /// Offer steps that undo what the shown goal lines ask for (by default, under `--protocol goals`,
+    /// a step that would make a goal line false while it holds is not offered, e.g. PLUGOUT of a
+    /// television that is to stay plugged in; a target is judged by its own action).
+    #[arg(long)]
+    pub no_keep_goals: bool,
     /// Where `done` may be answered, the model is done when its probability of `done` as the
     /// answer's first word (against `action:` and `subgoal:`) is at least P.
     #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT, value_parser = probability)]
@@ -190,6 +195,7 @@ impl DecisionArgs {
         cfg.single_step_lines = self.single_step_lines;
         cfg.report_changes = !self.no_change_report;
         cfg.protect_changes = !self.no_protect;
+        cfg.keep_goals = !self.no_keep_goals;
         cfg.done_at = (!self.no_done_check).then_some(self.done_at);
     }
 }

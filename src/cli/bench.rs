@@ -40,9 +40,10 @@ pub struct LlmArgs {
     /// Tokens to decode per run.
     #[arg(long, default_value_t = 64)]
     pub decode_tokens: usize,
-    /// Measure while other processes keep every core busy (a shared robot CPU).
-    #[arg(long)]
-    pub busy_neighbour: bool,
+    /// Measure beside busy neighbours (a shared robot CPU): N processes each keeping a core busy,
+    /// `all` for one per core. Without a value, one: the busy neighbour process of a robot PC.
+    #[arg(long, value_name = "N|all", num_args = 0..=1, default_missing_value = "1", value_parser = neighbour_count)]
+    pub busy_neighbour: Option<usize>,
     #[command(flatten)]
     pub inference: super::args::InferenceArgs,
     /// Also run llama.cpp's `llama-bench` at this path (built by ../shared/tools/llama-bench.sh) on
@@ -53,6 +54,17 @@ pub struct LlmArgs {
     /// Alternating rounds for --compare (each side runs once per round; ratios of the medians).
     #[arg(long, default_value_t = 3)]
     pub rounds: usize,
+}
+
+/// `--busy-neighbour`'s count: a number of processes from 1 to 64, or `all` (one per core).
+fn neighbour_count(s: &str) -> Result<usize, String> {
+    if s == "all" {
+        return Ok(std::thread::available_parallelism().map_or(1, |n| n.get()));
+    }
+    match s.parse::<usize>() {
+        Ok(n) if (1..=64).contains(&n) => Ok(n),
+        _ => Err(format!("{s:?} is not a neighbour count: give a number from 1 to 64, or `all` (one per core)")),
+    }
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
@@ -71,7 +83,10 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     let path = resolve_model(&a.model)?;
     // The neighbours start before the model loads, as on a robot PC where they already run when the
     // planner starts (so `--threads auto` sees them); they are stopped however this ends.
-    let _neighbours = if a.busy_neighbour { Neighbours::start()? } else { Neighbours(Vec::new()) };
+    let _neighbours = match a.busy_neighbour {
+        Some(n) => Neighbours::start(n)?,
+        None => Neighbours(Vec::new()),
+    };
     let mut engine = Engine::load_with_slices(&path, &[crate::grammar::TEXT_SLICE.to_string()])?;
     if let Some(llama) = &a.compare {
         return compare(a, &mut engine, &path, llama);
@@ -79,7 +94,7 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens };
     let report = run_llm_bench(&mut engine, &cfg)?;
     let mut json = serde_json::to_value(&report)?;
-    json["busy_neighbour"] = serde_json::Value::Bool(a.busy_neighbour);
+    json["busy_neighbours"] = serde_json::json!(a.busy_neighbour.unwrap_or(0));
     eprintln!("{}", table(&report));
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
@@ -115,13 +130,17 @@ fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyh
         threads,
         a.decode_tokens,
         a.rounds.max(1),
-        if a.busy_neighbour { ", busy neighbour" } else { "" },
+        match a.busy_neighbour {
+            Some(1) => ", 1 busy neighbour".to_string(),
+            Some(n) => format!(", {n} busy neighbours"),
+            None => String::new(),
+        },
         op / tp.max(1e-9),
         od / td.max(1e-9),
     );
     let json = serde_json::json!({
         "model": model.display().to_string(), "threads": threads, "prompt_tokens": prompt_tokens,
-        "decode_tokens": a.decode_tokens, "rounds": a.rounds.max(1), "busy_neighbour": a.busy_neighbour,
+        "decode_tokens": a.decode_tokens, "rounds": a.rounds.max(1), "busy_neighbours": a.busy_neighbour.unwrap_or(0),
         "ours": { "prefill_tok_per_s": op, "decode_tok_per_s": od },
         "llama_cpp": { "prefill_tok_per_s": tp, "decode_tok_per_s": td },
         "ratio": { "prefill": op / tp.max(1e-9), "decode": od / td.max(1e-9) },
@@ -160,13 +179,14 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
-/// One burning process per core, so our threads always have a competitor; killed when dropped.
+/// Burning processes, one core each, killed when dropped. One is the busy neighbour (on two
+/// cores a fair scheduler leaves us one and a half); one per core leaves each of our threads half a
+/// core at best, so 0.5x of unloaded throughput is then the ceiling, not a target.
 struct Neighbours(Vec<Child>);
 
 impl Neighbours {
-    fn start() -> anyhow::Result<Neighbours> {
+    fn start(n: usize) -> anyhow::Result<Neighbours> {
         let exe = std::env::current_exe()?;
-        let n = std::thread::available_parallelism().map_or(1, |n| n.get());
         let mut started = Neighbours(Vec::new());
         for _ in 0..n {
             started.0.push(

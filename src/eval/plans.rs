@@ -135,6 +135,7 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
     let req = PlanRequest {
         context: protocol::context(task, cfg.seen),
         subgoals: if cfg.planner.goal_subgoals { protocol::subgoals(task, cfg.seen) } else { Vec::new() },
+        kept: protocol::kept(task, cfg.seen),
         ..PlanRequest::new(protocol::instruction(task), focus.clone())
     };
     let mut trace = match &cfg.trace_dir {

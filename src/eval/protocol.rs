@@ -17,7 +17,8 @@ use std::str::FromStr;
 use serde::Serialize;
 
 use super::task::{RelevantRule, Task};
-use crate::world::World;
+use crate::world::vocab::Relation;
+use crate::world::{Fact, World};
 
 /// How much of the task the planner is shown (each level includes the previous).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -245,6 +246,23 @@ pub fn subgoals(task: &Task, seen: Seen) -> Vec<String> {
     }
 }
 
+/// `PlanRequest.kept` for a task under `seen`: the goal's states and relations as facts when the
+/// planner is shown the goals (closeness left out: a robot walks away from things on its way),
+/// else none.
+pub fn kept(task: &Task, seen: Seen) -> Vec<Fact> {
+    if seen != Seen::Goals {
+        return Vec::new();
+    }
+    let g = &task.goal;
+    let states = g.nodes.iter().map(|n| Fact::State { id: n.id, state: n.state });
+    let edges = g
+        .edges
+        .iter()
+        .filter(|e| e.relation_type != Relation::Close)
+        .map(|e| Fact::Edge { from: e.from_id, relation: e.relation_type, to: e.to_id });
+    states.chain(edges).collect()
+}
+
 /// `PlanRequest.context` for a task under `seen`: nothing for `instruction`; the objects for
 /// `objects`; the objects and the goals for `goals`.
 pub fn context(task: &Task, seen: Seen) -> Option<String> {
@@ -295,6 +313,19 @@ mod tests {
             instruction(tv),
             "Watch TV. Go to the living room, switch on the television, sit on the sofa and watch."
         );
+    }
+
+    #[test]
+    fn the_kept_facts_are_the_goals_states_and_relations_under_goals_only() {
+        use crate::world::vocab::State;
+        let tasks = demo_tasks();
+        let apple = tasks.iter().find(|t| t.id == "apple_in_fridge").unwrap();
+        assert!(kept(apple, Seen::Instruction).is_empty() && kept(apple, Seen::Objects).is_empty());
+        let facts = kept(apple, Seen::Goals);
+        assert!(facts.contains(&Fact::State { id: 10, state: State::Closed }), "{facts:?}");
+        assert!(facts.contains(&Fact::Edge { from: 12, relation: Relation::Inside, to: 10 }), "{facts:?}");
+        // One fact per state and relation goal, closeness aside (none here).
+        assert_eq!(facts.len(), apple.goal.nodes.len() + apple.goal.edges.len(), "{facts:?}");
     }
 
     #[test]

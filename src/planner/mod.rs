@@ -26,7 +26,7 @@ use serde_json::{json, Value};
 use crate::action::{Action, Verb};
 use crate::llm::engine::{GenOptions, Generate};
 use crate::llm::sample::Sampling;
-use crate::world::World;
+use crate::world::{Fact, World};
 
 pub use env::{DryRunEnv, Env, EnvError, Outcome, SimEnv};
 pub use planner::ContextMode;
@@ -92,6 +92,10 @@ pub struct PlanRequest {
     /// Subgoals offered to the root's decomposition, one line each (a task's goals in words, when the
     /// protocol shows them): the root's subgoals are chosen among these instead of written freely.
     pub subgoals: Vec<String>,
+    /// What the task asks to hold at the end, as facts (the shown goal lines' states and relations,
+    /// closeness aside): with [`PlannerConfig::keep_goals`] no step that would make one false while
+    /// it holds is offered. Empty unless the protocol shows the goals. Never a reason to stop.
+    pub kept: Vec<Fact>,
     /// DIAGNOSTIC ONLY, an oracle: a goal check the loop may stop at (with `PlannerConfig::oracle_stop`).
     /// A planner that stops because the scorer's goals hold is not deciding when to stop; figures
     /// obtained with it must be labelled as oracle figures and never reported as the planner's.
@@ -100,7 +104,14 @@ pub struct PlanRequest {
 
 impl PlanRequest {
     pub fn new(instruction: impl Into<String>, focus: Vec<u32>) -> PlanRequest {
-        PlanRequest { instruction: instruction.into(), context: None, focus, subgoals: Vec::new(), oracle: None }
+        PlanRequest {
+            instruction: instruction.into(),
+            context: None,
+            focus,
+            subgoals: Vec::new(),
+            kept: Vec::new(),
+            oracle: None,
+        }
     }
 }
 
@@ -111,6 +122,7 @@ impl std::fmt::Debug for PlanRequest {
             .field("context", &self.context)
             .field("focus", &self.focus)
             .field("subgoals", &self.subgoals)
+            .field("kept", &self.kept)
             .field("oracle", &self.oracle.is_some())
             .finish()
     }
@@ -197,6 +209,13 @@ pub struct PlannerConfig {
     /// are left out: they are means (a grab is undone by the put it was for). The random planner
     /// obeys it too. A rule on the node's own steps, not a look at the goals.
     pub protect_changes: bool,
+    /// Do not offer a step that would make false a fact the task asks for while it holds
+    /// ([`PlanRequest::kept`]: PLUGOUT of a television that is to stay plugged in, putting down what
+    /// is to be held). A chosen target is judged by its own action, not by the steps on its way (a
+    /// closed fridge that is to stay closed may be opened to put the apple in, and closed again by
+    /// its own line). The random planner obeys it too. It reads the goal lines the protocol shows,
+    /// and never decides when to stop.
+    pub keep_goals: bool,
     /// Where `done` may be answered, the model is done when its own probability of `done` as the
     /// answer's first word (against `action:` and `subgoal:`) is at least this: greedy decoding takes
     /// `done` only when it comes first, and a tiny model shown more action lines than `done` lines
@@ -238,6 +257,7 @@ impl Default for PlannerConfig {
             fresh_steps: true,
             report_changes: true,
             protect_changes: true,
+            keep_goals: true,
             done_at: Some(DONE_AT),
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
@@ -451,6 +471,7 @@ impl PlannerConfig {
             "fresh_steps": self.fresh_steps,
             "report_changes": self.report_changes,
             "protect_changes": self.protect_changes,
+            "keep_goals": self.keep_goals,
             "done_at": self.done_at,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
@@ -523,6 +544,7 @@ impl PlannerConfig {
         c.single_step_lines = v.get("single_step_lines").and_then(Value::as_bool).unwrap_or(false);
         c.report_changes = v.get("report_changes").and_then(Value::as_bool).unwrap_or(false);
         c.protect_changes = v.get("protect_changes").and_then(Value::as_bool).unwrap_or(false);
+        c.keep_goals = v.get("keep_goals").and_then(Value::as_bool).unwrap_or(false);
         c.done_at = v.get("done_at").and_then(Value::as_f64);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,

@@ -288,6 +288,7 @@ impl Run<'_> {
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
             .filter(|a| !st.tried.contains(&a.to_string()))
             .filter(|a| w.after_way_to(a).is_some_and(|after| changes_its_objects(w, &after, a)))
+            .filter(|a| !self.keeps_goals() || !before_target(w, a).is_some_and(|b| undoes(&b, a, &self.req.kept)))
             .collect();
         Ok(menu)
     }
@@ -335,6 +336,14 @@ impl Run<'_> {
     ) -> Result<Option<String>, StopCause> {
         self.check_global()?;
         let hash = prompt_hash(prompt, lark);
+        // The full prompt only on request (`--log step::planner=trace`): it is long, and the trace
+        // keeps its hash.
+        if tracing::enabled!(tracing::Level::TRACE) {
+            if let Prompt::Chat(m) = prompt {
+                let turns: Vec<String> = m.iter().skip(1).map(|m| format!("[{}]\n{}", m.role, m.content)).collect();
+                tracing::trace!("{role} prompt at node {node} (the system message left out):\n{}", turns.join("\n"));
+            }
+        }
         let t = Instant::now();
         let r = self.model.generate(prompt, Some(lark), &self.cfg.gen);
         let total_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -510,6 +519,13 @@ impl Run<'_> {
                 ActionSet::Exact(list) if self.cfg.protect_changes && !st.established.is_empty() => {
                     let w = self.world()?;
                     ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &st.established)).collect())
+                }
+                set => set,
+            };
+            let actions = match actions {
+                ActionSet::Exact(list) if self.keeps_goals() => {
+                    let w = self.world()?;
+                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &self.req.kept)).collect())
                 }
                 set => set,
             };
@@ -751,6 +767,11 @@ impl Run<'_> {
         }
     }
 
+    /// Whether steps that undo what the task asks for are left out (see `PlannerConfig::keep_goals`).
+    fn keeps_goals(&self) -> bool {
+        self.cfg.keep_goals && !self.req.kept.is_empty()
+    }
+
     /// "now <fact>, …": what the last step changed, in the goal lines' words, when changes are
     /// reported and it changed any.
     fn change_report(&self) -> Option<String> {
@@ -908,6 +929,20 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
 fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     let ids: Vec<u32> = target.args.iter().map(|o| o.id).collect();
     after.facts_among(&ids).iter().any(|f| !is_edge(f, &[Relation::Close]) && !now.holds(f))
+}
+
+/// The state the way to `target` leads to, just before `target` itself runs (the steps of
+/// `World::after_way_to` but the last).
+fn before_target(w: &World, target: &Action) -> Option<World> {
+    let mut w = w.clone();
+    for _ in 0..8 {
+        let step = w.first_step_towards(target)?;
+        if step == *target {
+            return Some(w);
+        }
+        w.execute(&step).ok()?;
+    }
+    None
 }
 
 /// Whether running `a` now would make false a fact of `established` that still holds (tried on a

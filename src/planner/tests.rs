@@ -868,3 +868,39 @@ fn without_the_subgoal_tree_the_root_shown_goal_lines_acts_and_may_say_done() {
     assert!(m.grammars[1].contains("\"done\"") && !m.grammars[1].contains("subgoal"), "{}", m.grammars[1]);
     assert_eq!(out.tree.node(out.tree.root()).status, Status::Executed);
 }
+
+#[test]
+fn steps_that_undo_what_the_task_asks_for_are_not_offered() {
+    use crate::world::vocab::State;
+    let tv = "television is ON";
+    let go = |kept: Vec<Fact>, keep_goals: bool, lines: &[&str], answers: &[&str]| {
+        let mut m = Scripted::new(answers);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { kept, ..offered(lines) };
+        let cfg = PlannerConfig { keep_goals, ..defaults() };
+        plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        m
+    };
+    let plugged = vec![Fact::State { id: 31, state: State::PluggedIn }];
+    let walk_tv = "action: [WALK] <television> (31)";
+    // The demo television is plugged in: PLUGOUT is neither a target from afar nor a step close by.
+    let m = go(plugged.clone(), true, &[tv], &[walk_tv, "done"]);
+    for g in &m.grammars[..2] {
+        assert!(!admits(g, "PLUGOUT", "<television> (31)"), "{g}");
+        assert!(admits(g, "SWITCHON", "<television> (31)"), "other steps stay: {g}");
+    }
+    // With the check off, or nothing kept (a protocol without the goals), it is offered.
+    for m in [go(plugged, false, &[tv], &[walk_tv, "done"]), go(vec![], true, &[tv], &[walk_tv, "done"])] {
+        assert!(admits(&m.grammars[1], "PLUGOUT", "<television> (31)"), "{}", m.grammars[1]);
+    }
+    // A target is judged by its own action: the fridge that is to stay closed cannot be opened for
+    // its own sake, but PUTIN may open it on its way.
+    let closed = vec![Fact::State { id: 10, state: State::Closed }];
+    let m = go(closed, true, &[APPLE_IN_FRIDGE], &[&format!("action: {PUTIN}"), "done"]);
+    assert!(!admits(&m.grammars[0], "OPEN", "<fridge> (10)"), "{}", m.grammars[0]);
+    // (two-object verbs are written `"[PUTIN] " (FIRST_k OBJS_n)`: the second slot's list names the fridge)
+    let g = &m.grammars[0];
+    let putin = g.lines().find_map(|l| l.split_once("\"[PUTIN] \" (").map(|(_, t)| t.to_string()));
+    let second = putin.as_deref().and_then(|t| t.trim_end_matches(')').split_whitespace().nth(1)).unwrap_or("?");
+    assert!(g.lines().any(|l| l.starts_with(&format!("{second}:")) && l.contains("\"<fridge> (10)\"")), "{g}");
+}
