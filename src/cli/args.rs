@@ -163,7 +163,9 @@ pub struct DecisionArgs {
     #[arg(long)]
     pub no_keep_goals: bool,
     /// Where `done` may be answered, the model is done when its probability of `done` as the
-    /// answer's first word (against `action:` and `subgoal:`) is at least P.
+    /// answer's first word (against `action:` and `subgoal:`) is at least P. Not used where the
+    /// task's goals are kept (`--protocol goals` without `--no-keep-goals`): there greedy `done`
+    /// decides.
     #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT, value_parser = probability)]
     pub done_at: f64,
     /// Take `done` only when greedy decoding writes it (no look at its probability).

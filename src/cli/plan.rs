@@ -401,6 +401,11 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         .as_array()
         .map(|a| a.iter().filter_map(|x| x.as_str().map(str::to_string)).collect())
         .unwrap_or_default();
+    // (traces written before kept goals existed have none)
+    req.kept = match r.get("kept") {
+        Some(k) => serde_json::from_value(k.clone()).map_err(|e| anyhow!("{}: the header's kept goals: {e}", args.trace.display()))?,
+        None => Vec::new(),
+    };
     let env_name = h["env"].as_str().unwrap_or("sim");
     let mut env = make_env(env_name, world, req.focus.clone())?;
     let model = match &args.model {

@@ -590,7 +590,7 @@ impl Run<'_> {
                     Some(t) => t,
                     None => return Ok(End::Abandoned("random_steps")),
                 }
-            } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal)? {
+            } else if dg.allow_done && !self.keeps_goals() && self.done_check(node, &prompt, dg.allow_subgoal)? {
                 "done".to_string()
             } else {
                 let Some(text) = self.call("decompose", node, &prompt, &lark)? else {

@@ -904,3 +904,24 @@ fn steps_that_undo_what_the_task_asks_for_are_not_offered() {
     let second = putin.as_deref().and_then(|t| t.trim_end_matches(')').split_whitespace().nth(1)).unwrap_or("?");
     assert!(g.lines().any(|l| l.starts_with(&format!("{second}:")) && l.contains("\"<fridge> (10)\"")), "{g}");
 }
+
+#[test]
+fn where_the_goals_are_kept_greedy_done_decides_without_the_check() {
+    use crate::world::vocab::State;
+    let tv = "television is ON";
+    let run = |kept: Vec<Fact>| {
+        let mut m = Scripted::new(&["action: [SWITCHON] <television> (31)", "action: [TURNTO] <television> (31)", "done"]);
+        m.p_done = 0.9;
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { kept, ..offered(&[tv]) };
+        let out = plan(&mut m, &mut env, &req, &PlannerConfig::default(), &mut TraceWriter::sink());
+        (out, m)
+    };
+    // Nothing kept: the check (p 0.9) ends the line after its first step.
+    let (out, m) = run(vec![]);
+    assert_eq!((out.stop, m.scored.len(), m.prompts.len()), (StopCause::Done, 1, 1));
+    // Kept: no check; the model's own `done` ends the line, after a second step.
+    let (out, m) = run(vec![Fact::State { id: 31, state: State::On }]);
+    assert_eq!((&out.stop, m.scored.len(), m.prompts.len()), (&StopCause::Done, 0, 3));
+    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)", "[TURNTO] <television> (31)"]);
+}

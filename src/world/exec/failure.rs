@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::action::Action;
 use crate::world::vocab::{Relation, State};
@@ -46,7 +46,7 @@ impl fmt::Display for FailureKind {
 }
 
 /// A fact a failed precondition needed (as EAI records it, to tell a missing step from a wrong order).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Fact {
     /// An edge `from relation to`.
     Edge { from: u32, relation: Relation, to: u32 },
