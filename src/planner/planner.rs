@@ -288,7 +288,7 @@ impl Run<'_> {
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
             .filter(|a| !st.tried.contains(&a.to_string()))
             .filter(|a| w.after_way_to(a).is_some_and(|after| changes_its_objects(w, &after, a)))
-            .filter(|a| !self.keeps_goals() || !before_target(w, a).is_some_and(|b| undoes(&b, a, &self.req.kept)))
+            .filter(|a| !self.keeps_goals() || !w.before_running(a).is_some_and(|b| undoes(&b, a, &self.req.kept)))
             .collect();
         Ok(menu)
     }
@@ -929,20 +929,6 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
 fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     let ids: Vec<u32> = target.args.iter().map(|o| o.id).collect();
     after.facts_among(&ids).iter().any(|f| !is_edge(f, &[Relation::Close]) && !now.holds(f))
-}
-
-/// The state the way to `target` leads to, just before `target` itself runs (the steps of
-/// `World::after_way_to` but the last).
-fn before_target(w: &World, target: &Action) -> Option<World> {
-    let mut w = w.clone();
-    for _ in 0..8 {
-        let step = w.first_step_towards(target)?;
-        if step == *target {
-            return Some(w);
-        }
-        w.execute(&step).ok()?;
-    }
-    None
 }
 
 /// Whether running `a` now would make false a fact of `established` that still holds (tried on a

@@ -53,13 +53,21 @@ impl World {
     /// The state after following the way to `target` and running it, on a copy (`None`: see
     /// [`World::reaches`]).
     pub fn after_way_to(&self, target: &Action) -> Option<World> {
+        let mut w = self.before_running(target)?;
+        w.execute(target).ok()?;
+        Some(w)
+    }
+
+    /// The state the way to `target` leads to, just before `target` itself runs, on a copy (`None`:
+    /// no way within 7 steps).
+    pub fn before_running(&self, target: &Action) -> Option<World> {
         let mut w = self.clone();
         for _ in 0..8 {
             let step = w.first_step_towards(target)?;
-            w.execute(&step).ok()?;
             if step == *target {
                 return Some(w);
             }
+            w.execute(&step).ok()?;
         }
         None
     }
