@@ -515,17 +515,19 @@ impl Run<'_> {
                 }
                 set => set,
             };
+            // Neither what this node's steps changed nor what the task asks for is undone: one trial
+            // of each candidate on a copy of the world answers both.
+            let mut protected: Vec<Fact> = Vec::new();
+            if self.cfg.protect_changes {
+                protected.extend(st.established.iter().cloned());
+            }
+            if self.keeps_goals() {
+                protected.extend(self.req.kept.iter().cloned());
+            }
             let actions = match actions {
-                ActionSet::Exact(list) if self.cfg.protect_changes && !st.established.is_empty() => {
+                ActionSet::Exact(list) if !protected.is_empty() => {
                     let w = self.world()?;
-                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &st.established)).collect())
-                }
-                set => set,
-            };
-            let actions = match actions {
-                ActionSet::Exact(list) if self.keeps_goals() => {
-                    let w = self.world()?;
-                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &self.req.kept)).collect())
+                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &protected)).collect())
                 }
                 set => set,
             };
