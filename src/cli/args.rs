@@ -162,15 +162,26 @@ pub struct DecisionArgs {
     /// television that is to stay plugged in; a target is judged by its own action).
     #[arg(long)]
     pub no_keep_goals: bool,
+    /// Offer steps that change nothing among their objects and the robot (by default, where the
+    /// goals are kept, LOOKAT, TOUCH or WASH of a clean plate is not offered unless the goals name
+    /// its verb as an action the plan must include).
+    #[arg(long)]
+    pub offer_idle_steps: bool,
     /// Where `done` may be answered, the model is done when its probability of `done` as the
-    /// answer's first word (against `action:` and `subgoal:`) is at least P. Not used where the
-    /// task's goals are kept (`--protocol goals` without `--no-keep-goals`): there greedy `done`
-    /// decides.
+    /// answer's first word (against `action:` and `subgoal:`) is at least P. Not used on the task's
+    /// goal lines with the goals kept (`--protocol goals` without `--no-keep-goals`): see
+    /// `--lines-done-at`.
     #[arg(long, value_name = "P", default_value_t = crate::planner::DONE_AT, value_parser = probability)]
     pub done_at: f64,
-    /// Take `done` only when greedy decoding writes it (no look at its probability).
+    /// Take `done` only when greedy decoding writes it (no look at its probability), on goal lines
+    /// too.
     #[arg(long)]
     pub no_done_check: bool,
+    /// On the task's goal lines with the goals kept, the model is done with a line only when its
+    /// probability of `done` as the answer's first word is at least P (below it, `done` is not
+    /// offered to that decision).
+    #[arg(long, value_name = "P", default_value_t = crate::planner::LINES_DONE_AT, value_parser = probability)]
+    pub lines_done_at: f64,
 }
 
 /// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
@@ -198,6 +209,8 @@ impl DecisionArgs {
         cfg.report_changes = !self.no_change_report;
         cfg.protect_changes = !self.no_protect;
         cfg.keep_goals = !self.no_keep_goals;
+        cfg.skip_idle = !self.offer_idle_steps;
         cfg.done_at = (!self.no_done_check).then_some(self.done_at);
+        cfg.lines_done_at = (!self.no_done_check).then_some(self.lines_done_at);
     }
 }

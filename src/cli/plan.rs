@@ -406,6 +406,10 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         Some(k) => serde_json::from_value(k.clone()).map_err(|e| anyhow!("{}: the header's kept goals: {e}", args.trace.display()))?,
         None => Vec::new(),
     };
+    req.named_verbs = match r.get("named_verbs") {
+        Some(k) => serde_json::from_value(k.clone()).map_err(|e| anyhow!("{}: the header's named verbs: {e}", args.trace.display()))?,
+        None => Vec::new(),
+    };
     let env_name = h["env"].as_str().unwrap_or("sim");
     let mut env = make_env(env_name, world, req.focus.clone())?;
     let model = match &args.model {

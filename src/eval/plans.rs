@@ -136,6 +136,7 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         context: protocol::context(task, cfg.seen),
         subgoals: if cfg.planner.goal_subgoals { protocol::subgoals(task, cfg.seen) } else { Vec::new() },
         kept: protocol::kept(task, cfg.seen),
+        named_verbs: protocol::named_verbs(task, cfg.seen),
         ..PlanRequest::new(protocol::instruction(task), focus.clone())
     };
     let mut trace = match &cfg.trace_dir {

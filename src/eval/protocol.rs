@@ -17,6 +17,7 @@ use std::str::FromStr;
 use serde::Serialize;
 
 use super::task::{RelevantRule, Task};
+use crate::action::Verb;
 use crate::world::vocab::Relation;
 use crate::world::{Fact, World};
 
@@ -261,6 +262,18 @@ pub fn kept(task: &Task, seen: Seen) -> Vec<Fact> {
         .filter(|e| e.relation_type != Relation::Close)
         .map(|e| Fact::Edge { from: e.from_id, relation: e.relation_type, to: e.to_id });
     states.chain(edges).collect()
+}
+
+/// `PlanRequest.named_verbs` for a task under `seen`: the verbs its action lines name ("LOOKAT or
+/// WATCH") when the planner is shown the goals, else none.
+pub fn named_verbs(task: &Task, seen: Seen) -> Vec<Verb> {
+    if seen != Seen::Goals {
+        return Vec::new();
+    }
+    let mut out: Vec<Verb> = task.goal.actions.iter().flat_map(|a| a.any_of.iter().copied()).collect();
+    out.sort();
+    out.dedup();
+    out
 }
 
 /// `PlanRequest.context` for a task under `seen`: nothing for `instruction`; the objects for

@@ -289,6 +289,11 @@ impl Run<'_> {
             .filter(|a| !st.tried.contains(&a.to_string()))
             .filter(|a| w.after_way_to(a).is_some_and(|after| changes_its_objects(w, &after, a)))
             .filter(|a| !self.keeps_goals() || !w.before_running(a).is_some_and(|b| undoes(&b, a, &self.req.kept)))
+            // (with `skip_idle`, a target whose own action changes nothing: LOOKAT by way of TURNTO)
+            .filter(|a| {
+                !(self.cfg.skip_idle && self.keeps_goals() && !self.req.named_verbs.contains(&a.verb))
+                    || !w.before_running(a).is_some_and(|b| trial(&b, a).is_some_and(|after| changes_nothing(&b, &after, a)))
+            })
             .collect();
         Ok(menu)
     }
@@ -394,8 +399,8 @@ impl Run<'_> {
 
     /// Whether the model is done at `node` by its own probability of `done` as its answer's first
     /// word (see [`PlannerConfig::done_at`]). A model that cannot score leaves it to generation.
-    fn done_check(&mut self, node: NodeId, prompt: &Prompt, subgoals: bool) -> Result<bool, StopCause> {
-        let Some(at) = self.cfg.done_at else { return Ok(false) };
+    fn done_check(&mut self, node: NodeId, prompt: &Prompt, subgoals: bool, at: Option<f64>) -> Result<bool, StopCause> {
+        let Some(at) = at else { return Ok(false) };
         self.check_global()?;
         let mut words = vec!["done".to_string(), "action:".to_string()];
         if subgoals {
@@ -524,10 +529,25 @@ impl Run<'_> {
             if self.keeps_goals() {
                 protected.extend(self.req.kept.iter().cloned());
             }
+            // Where the goals are kept, a step that would change nothing is not offered below the
+            // root either (the same trial tells).
+            let skip_idle = self.cfg.skip_idle && self.keeps_goals() && !is_root;
             let actions = match actions {
-                ActionSet::Exact(list) if !protected.is_empty() => {
+                ActionSet::Exact(list) if !protected.is_empty() || skip_idle => {
                     let w = self.world()?;
-                    ActionSet::Exact(list.into_iter().filter(|a| !undoes(w, a, &protected)).collect())
+                    let named = &self.req.named_verbs;
+                    ActionSet::Exact(
+                        list.into_iter()
+                            .filter(|a| match trial(w, a) {
+                                // (one that cannot run is left to the checks after)
+                                None => true,
+                                Some(after) => {
+                                    !protected.iter().any(|f| w.holds(f) && !after.holds(f))
+                                        && !(skip_idle && !named.contains(&a.verb) && changes_nothing(w, &after, a))
+                                }
+                            })
+                            .collect(),
+                    )
                 }
                 set => set,
             };
@@ -584,6 +604,13 @@ impl Run<'_> {
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
             let only = dg.only_choice();
+            // Where the goals are kept, `lines_done_at` judges `done` (strictly: below it the model
+            // may not write it); elsewhere `done_at` (below it the model may still write it).
+            let (done_at, lines_strict) = if self.keeps_goals() {
+                (self.cfg.lines_done_at, self.cfg.lines_done_at.is_some())
+            } else {
+                (self.cfg.done_at, false)
+            };
             let text = if let Some(line) = only {
                 // One admissible answer: asking a model (or drawing) could not change it.
                 line
@@ -592,9 +619,18 @@ impl Run<'_> {
                     Some(t) => t,
                     None => return Ok(End::Abandoned("random_steps")),
                 }
-            } else if dg.allow_done && !self.keeps_goals() && self.done_check(node, &prompt, dg.allow_subgoal)? {
+            } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal, done_at)? {
                 "done".to_string()
             } else {
+                // Below the goal lines' threshold the model is not done: `done` leaves the grammar
+                // (while anything else can be written).
+                let no_done = DecomposeGrammar { allow_done: false, ..dg.clone() };
+                let something_else = no_done.allow_subgoal || !matches!(&no_done.actions, ActionSet::Exact(l) if l.is_empty());
+                let lark = if dg.allow_done && lines_strict && something_else {
+                    no_done.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?
+                } else {
+                    lark
+                };
                 let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
                     st.replans += 1;
                     self.stats.replans += 1;
@@ -826,6 +862,10 @@ impl Run<'_> {
                     (Some(before), Some(w)) => w.facts_among(&ids).into_iter().filter(|f| !before.contains(f)).collect(),
                     _ => Vec::new(),
                 };
+                if let (false, Some(w)) = (self.last_change.is_empty(), self.env.world()) {
+                    let facts: Vec<String> = self.last_change.iter().map(|f| w.describe(f)).collect();
+                    self.trace.event("changed", json!({"node": child, "facts": facts}));
+                }
                 Ok(match (&outcome, self.change_report()) {
                     (Outcome::Skipped { .. }, _) => "ok (it already was so)".to_string(),
                     (Outcome::Ok { observation: Some(o) }, _) => format!("ok, {o}"),
@@ -936,11 +976,22 @@ fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
 /// Whether running `a` now would make false a fact of `established` that still holds (tried on a
 /// copy of the world; an action that cannot run undoes nothing).
 fn undoes(w: &World, a: &Action, established: &[Fact]) -> bool {
+    trial(w, a).is_some_and(|after| established.iter().any(|f| w.holds(f) && !after.holds(f)))
+}
+
+/// The world after running `a` on a copy of `w`, if it can run.
+fn trial(w: &World, a: &Action) -> Option<World> {
     let mut after = w.clone();
-    if after.execute(a).is_err() {
-        return false;
-    }
-    established.iter().any(|f| w.holds(f) && !after.holds(f))
+    after.execute(a).ok()?;
+    Some(after)
+}
+
+/// Whether the facts among `a`'s objects and the robot are the same `after` it as `now` (nothing
+/// gained, nothing lost).
+fn changes_nothing(now: &World, after: &World, a: &Action) -> bool {
+    let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+    let (before, then) = (now.facts_among(&ids), after.facts_among(&ids));
+    before.len() == then.len() && then.iter().all(|f| before.contains(f))
 }
 
 /// Whether `f` is an edge of one of these relations.

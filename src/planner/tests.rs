@@ -906,7 +906,7 @@ fn steps_that_undo_what_the_task_asks_for_are_not_offered() {
 }
 
 #[test]
-fn where_the_goals_are_kept_greedy_done_decides_without_the_check() {
+fn where_the_goals_are_kept_the_done_check_is_not_used_and_without_a_lines_rule_greedy_done_decides() {
     use crate::world::vocab::State;
     let tv = "television is ON";
     let run = |kept: Vec<Fact>| {
@@ -914,7 +914,8 @@ fn where_the_goals_are_kept_greedy_done_decides_without_the_check() {
         m.p_done = 0.9;
         let mut env = SimEnv::new(World::demo(), vec![]);
         let req = PlanRequest { kept, ..offered(&[tv]) };
-        let out = plan(&mut m, &mut env, &req, &PlannerConfig::default(), &mut TraceWriter::sink());
+        let cfg = PlannerConfig { lines_done_at: None, ..PlannerConfig::default() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
         (out, m)
     };
     // Nothing kept: the check (p 0.9) ends the line after its first step.
@@ -924,4 +925,54 @@ fn where_the_goals_are_kept_greedy_done_decides_without_the_check() {
     let (out, m) = run(vec![Fact::State { id: 31, state: State::On }]);
     assert_eq!((&out.stop, m.scored.len(), m.prompts.len()), (&StopCause::Done, 0, 3));
     assert_eq!(plan_lines(&out), ["[WALK] <television> (31)", "[SWITCHON] <television> (31)", "[TURNTO] <television> (31)"]);
+}
+
+#[test]
+fn on_kept_goal_lines_done_needs_its_probability_to_reach_the_lines_threshold() {
+    use crate::world::vocab::State;
+    let tv = "television is ON";
+    let run = |p_done: f64| {
+        let mut m = Scripted::new(&["action: [SWITCHON] <television> (31)", "action: [TURNTO] <television> (31)", "done"]);
+        m.p_done = p_done;
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { kept: vec![Fact::State { id: 31, state: State::On }], ..offered(&[tv]) };
+        let cfg = PlannerConfig { lines_done_at: Some(0.5), ..PlannerConfig::default() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    // Confident (0.9): done after the first step, by the check, with no generation.
+    let (out, m) = run(0.9);
+    assert_eq!((&out.stop, m.scored.len(), m.prompts.len()), (&StopCause::Done, 1, 1));
+    // Below the threshold (0.3): `done` is not in the next generation's grammar, so the model goes
+    // on until nothing fresh is left (the script's `done` is never asked for).
+    let (out, m) = run(0.3);
+    assert_eq!((m.scored.len(), m.grammars.len()), (2, 3));
+    for g in &m.grammars[1..] {
+        assert!(!g.contains("\"done\""), "{g}");
+    }
+    assert!(plan_lines(&out).contains(&"[TURNTO] <television> (31)".to_string()), "{:?}", plan_lines(&out));
+}
+
+#[test]
+fn where_the_goals_are_kept_steps_that_change_nothing_are_not_offered_unless_the_goals_name_them() {
+    use crate::action::Verb;
+    use crate::world::vocab::State;
+    let tv = "television is ON";
+    let go = |skip_idle: bool, named_verbs: Vec<Verb>| {
+        let mut m = Scripted::new(&["action: [WALK] <television> (31)", "done"]);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { kept: vec![Fact::State { id: 31, state: State::On }], named_verbs, ..offered(&[tv]) };
+        let cfg = PlannerConfig { skip_idle, ..defaults() };
+        plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        m
+    };
+    // Close to the television: LOOKAT and TOUCH change nothing, SWITCHON and TURNTO do.
+    let g = &go(true, vec![]).grammars[1];
+    assert!(!admits(g, "LOOKAT", "<television> (31)") && !admits(g, "TOUCH", "<television> (31)"), "{g}");
+    assert!(admits(g, "SWITCHON", "<television> (31)") && admits(g, "TURNTO", "<television> (31)"), "{g}");
+    // A verb the goals name as an action stays; with the rule off, every step is offered.
+    let g = &go(true, vec![Verb::LookAt]).grammars[1];
+    assert!(admits(g, "LOOKAT", "<television> (31)") && !admits(g, "TOUCH", "<television> (31)"), "{g}");
+    let g = &go(false, vec![]).grammars[1];
+    assert!(admits(g, "LOOKAT", "<television> (31)") && admits(g, "TOUCH", "<television> (31)"), "{g}");
 }
