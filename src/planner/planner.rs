@@ -287,12 +287,16 @@ impl Run<'_> {
             .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
             .filter(|a| !st.tried.contains(&a.to_string()))
-            .filter(|a| w.after_way_to(a).is_some_and(|after| changes_its_objects(w, &after, a)))
-            .filter(|a| !self.keeps_goals() || !w.before_running(a).is_some_and(|b| undoes(&b, a, &self.req.kept)))
-            // (with `skip_idle`, a target whose own action changes nothing: LOOKAT by way of TURNTO)
+            // A target is judged by its own action, in the state its way leads to (one walk of the
+            // way and one trial per candidate): it must change something among its objects, undo
+            // nothing the task asks for, and (with `skip_idle`) not be an idle step itself (LOOKAT
+            // by way of TURNTO).
             .filter(|a| {
-                !(self.cfg.skip_idle && self.keeps_goals() && !self.req.named_verbs.contains(&a.verb))
-                    || !w.before_running(a).is_some_and(|b| trial(&b, a).is_some_and(|after| changes_nothing(&b, &after, a)))
+                let Some(before) = w.before_running(a) else { return false };
+                let Some(after) = trial(&before, a) else { return false };
+                changes_its_objects(w, &after, a)
+                    && !(self.keeps_goals() && makes_false(&before, &after, &self.req.kept))
+                    && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
             })
             .collect();
         Ok(menu)
@@ -535,19 +539,13 @@ impl Run<'_> {
             let actions = match actions {
                 ActionSet::Exact(list) if !protected.is_empty() || skip_idle => {
                     let w = self.world()?;
-                    let named = &self.req.named_verbs;
-                    ActionSet::Exact(
-                        list.into_iter()
-                            .filter(|a| match trial(w, a) {
-                                // (one that cannot run is left to the checks after)
-                                None => true,
-                                Some(after) => {
-                                    !protected.iter().any(|f| w.holds(f) && !after.holds(f))
-                                        && !(skip_idle && !named.contains(&a.verb) && changes_nothing(w, &after, a))
-                                }
-                            })
-                            .collect(),
-                    )
+                    // (one that cannot run is left to the checks after)
+                    let keep = |a: &Action| {
+                        trial(w, a).is_none_or(|after| {
+                            !makes_false(w, &after, &protected) && !(skip_idle && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
+                        })
+                    };
+                    ActionSet::Exact(list.into_iter().filter(|a| keep(a)).collect())
                 }
                 set => set,
             };
@@ -624,9 +622,9 @@ impl Run<'_> {
             } else {
                 // Below the goal lines' threshold the model is not done: `done` leaves the grammar
                 // (while anything else can be written).
-                let no_done = DecomposeGrammar { allow_done: false, ..dg.clone() };
-                let something_else = no_done.allow_subgoal || !matches!(&no_done.actions, ActionSet::Exact(l) if l.is_empty());
+                let something_else = dg.allow_subgoal || !matches!(&dg.actions, ActionSet::Exact(l) if l.is_empty());
                 let lark = if dg.allow_done && lines_strict && something_else {
+                    let no_done = DecomposeGrammar { allow_done: false, ..dg.clone() };
                     no_done.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?
                 } else {
                     lark
@@ -810,6 +808,11 @@ impl Run<'_> {
         self.cfg.keep_goals && !self.req.kept.is_empty()
     }
 
+    /// Whether a step of `verb` that changes nothing is left out (see `PlannerConfig::skip_idle`).
+    fn skips_idle(&self, verb: Verb) -> bool {
+        self.cfg.skip_idle && self.keeps_goals() && !self.req.named_verbs.contains(&verb)
+    }
+
     /// "now <fact>, …": what the last step changed, in the goal lines' words, when changes are
     /// reported and it changed any.
     fn change_report(&self) -> Option<String> {
@@ -973,10 +976,9 @@ fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     after.facts_among(&ids).iter().any(|f| !is_edge(f, &[Relation::Close]) && !now.holds(f))
 }
 
-/// Whether running `a` now would make false a fact of `established` that still holds (tried on a
-/// copy of the world; an action that cannot run undoes nothing).
-fn undoes(w: &World, a: &Action, established: &[Fact]) -> bool {
-    trial(w, a).is_some_and(|after| established.iter().any(|f| w.holds(f) && !after.holds(f)))
+/// Whether a fact of `facts` that holds `now` does not hold `after`.
+fn makes_false(now: &World, after: &World, facts: &[Fact]) -> bool {
+    facts.iter().any(|f| now.holds(f) && !after.holds(f))
 }
 
 /// The world after running `a` on a copy of `w`, if it can run.
