@@ -401,15 +401,9 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         .as_array()
         .map(|a| a.iter().filter_map(|x| x.as_str().map(str::to_string)).collect())
         .unwrap_or_default();
-    // (traces written before kept goals existed have none)
-    req.kept = match r.get("kept") {
-        Some(k) => serde_json::from_value(k.clone()).map_err(|e| anyhow!("{}: the header's kept goals: {e}", args.trace.display()))?,
-        None => Vec::new(),
-    };
-    req.named_verbs = match r.get("named_verbs") {
-        Some(k) => serde_json::from_value(k.clone()).map_err(|e| anyhow!("{}: the header's named verbs: {e}", args.trace.display()))?,
-        None => Vec::new(),
-    };
+    // (traces written before kept goals and named verbs existed have none)
+    req.kept = header_list(r, "kept", "kept goals", &args.trace)?;
+    req.named_verbs = header_list(r, "named_verbs", "named verbs", &args.trace)?;
     let env_name = h["env"].as_str().unwrap_or("sim");
     let mut env = make_env(env_name, world, req.focus.clone())?;
     let model = match &args.model {
@@ -433,5 +427,13 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
             println!("{d}");
         }
         bail!("the replay differs from the trace ({} difference(s); the first is above)", diffs.len())
+    }
+}
+
+/// A list in a trace header's request, empty where the header has none; `what` names it in errors.
+fn header_list<T: serde::de::DeserializeOwned>(r: &Value, key: &str, what: &str, trace: &Path) -> anyhow::Result<Vec<T>> {
+    match r.get(key) {
+        Some(v) => serde_json::from_value(v.clone()).map_err(|e| anyhow!("{}: the header's {what}: {e}", trace.display())),
+        None => Ok(Vec::new()),
     }
 }

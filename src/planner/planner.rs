@@ -84,6 +84,10 @@ struct NodeLoop {
     /// What this node's steps changed, kept from being undone by its later steps (see
     /// `PlannerConfig::protect_changes`).
     established: Vec<Fact>,
+    /// The root's goal lines whose fact held when they were done, and those offered again since
+    /// (see [`Run::undone_lines`]).
+    met_lines: Vec<String>,
+    reoffered: Vec<String>,
 }
 
 impl NodeLoop {
@@ -314,6 +318,7 @@ impl Run<'_> {
                 history: None,
                 rejected: rejected.map(str::to_string),
                 blocked: None,
+                options: None,
             },
             ContextMode::NoTree => NodeView {
                 observation,
@@ -322,6 +327,7 @@ impl Run<'_> {
                 history: history(),
                 rejected: rejected.map(str::to_string),
                 blocked: None,
+                options: None,
             },
             ContextMode::NoSubgoalTree => NodeView {
                 observation,
@@ -330,6 +336,7 @@ impl Run<'_> {
                 history: history(),
                 rejected: rejected.map(str::to_string),
                 blocked: None,
+                options: None,
             },
         }
     }
@@ -565,6 +572,9 @@ impl Run<'_> {
                 }
                 (None, actions) => actions,
             };
+            if offered && self.keeps_goals() {
+                self.undone_lines(&mut st)?;
+            }
             let subgoal_menu: Vec<String> = if offered {
                 self.req.subgoals.iter().filter(|l| !st.tried.contains(l)).cloned().collect()
             } else {
@@ -598,6 +608,9 @@ impl Run<'_> {
             // While offered lines remain, the root decomposes into them (actions come below them):
             // given the choice, both models wrote actions at the root and never took a line.
             let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
+            if self.cfg.show_effects {
+                view.options = self.effects_menu(&actions, &targets)?;
+            }
             let dg = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done, subgoal_menu };
             let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
             let prompt = self.prompter.decompose(&view);
@@ -766,6 +779,9 @@ impl Run<'_> {
                             if target_child.is_some() {
                                 self.establish(&mut st);
                             }
+                            if is_root && self.line_fact(&child_text).is_some_and(|f| self.env.world().is_some_and(|w| w.holds(f))) {
+                                st.met_lines.push(child_text.clone());
+                            }
                             st.rejected = None;
                             if one_step {
                                 return Ok(End::Complete);
@@ -803,9 +819,62 @@ impl Run<'_> {
         }
     }
 
-    /// Whether steps that undo what the task asks for are left out (see `PlannerConfig::keep_goals`).
+    /// Whether the rules for shown goals apply (see `PlannerConfig::keep_goals`): steps that undo
+    /// what the task asks for are left out, and with them idle steps and `lines_done_at`. A task
+    /// whose goals are only closeness and actions (pet the cat: be close to it, TOUCH it) keeps no
+    /// fact, yet its lines are goal lines all the same.
     fn keeps_goals(&self) -> bool {
-        self.cfg.keep_goals && !self.req.kept.is_empty()
+        self.cfg.keep_goals && (!self.req.kept.is_empty() || !self.req.named_verbs.is_empty())
+    }
+
+    /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).
+    fn line_fact(&self, line: &str) -> Option<&Fact> {
+        let w = self.env.world()?;
+        self.req.kept.iter().find(|f| w.describe(f) == line)
+    }
+
+    /// Where the goals are kept: a goal line that was met when done, and whose fact a later step
+    /// has made false (a target's way: SWITCHOFF of a dishwasher that is to be on, to open it and
+    /// put the plates in), is offered to the root again, once. Not a stop rule: it only lets the
+    /// root take a line again that its own steps undid; lines given up are not offered again.
+    fn undone_lines(&mut self, st: &mut NodeLoop) -> Result<(), StopCause> {
+        let w = self.world()?;
+        let undone: Vec<String> = st
+            .met_lines
+            .iter()
+            .filter(|l| !st.reoffered.contains(l))
+            .filter(|l| self.line_fact(l).is_some_and(|f| !w.holds(f)))
+            .cloned()
+            .collect();
+        for line in undone {
+            st.tried.retain(|t| *t != line);
+            st.met_lines.retain(|t| *t != line);
+            self.trace.event("reoffered", json!({"line": line, "why": "a later step made it false"}));
+            st.reoffered.push(line);
+        }
+        Ok(())
+    }
+
+    /// The options of a decision with their effects (see `PlannerConfig::show_effects`): each
+    /// action it may write, with the facts among its objects and the robot that running it (a
+    /// target: its way, then it) would make true, in the goal lines' words.
+    fn effects_menu(&self, actions: &ActionSet, targets: &[Action]) -> Result<Option<String>, StopCause> {
+        let ActionSet::Exact(list) = actions else { return Ok(None) };
+        if list.is_empty() {
+            return Ok(None);
+        }
+        let w = self.world()?;
+        let mut s = String::from("Steps you can take, and what each makes true:\n");
+        for a in list.iter().take(MAX_SHOWN_STEPS) {
+            let after = if targets.contains(a) { w.before_running(a).and_then(|b| trial(&b, a)) } else { trial(w, a) };
+            let facts: Vec<String> = after.map(|after| gained(w, &after, a)).unwrap_or_default().iter().take(3).map(|f| w.describe(f)).collect();
+            if facts.is_empty() {
+                s.push_str(&format!("{a}: nothing new\n"));
+            } else {
+                s.push_str(&format!("{a}: {}\n", facts.join(", ")));
+            }
+        }
+        Ok(Some(s))
     }
 
     /// Whether a step of `verb` that changes nothing is left out (see `PlannerConfig::skip_idle`).
@@ -974,6 +1043,22 @@ pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[A
 fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     let ids: Vec<u32> = target.args.iter().map(|o| o.id).collect();
     after.facts_among(&ids).iter().any(|f| !is_edge(f, &[Relation::Close]) && !now.holds(f))
+}
+
+/// The most steps [`Run::effects_menu`] shows (a prompt's tail stays a few hundred tokens).
+const MAX_SHOWN_STEPS: usize = 24;
+
+/// The facts among `a`'s objects and the robot that hold `after` it and not `now`, closeness only
+/// as the robot's (the object's mirror of it says nothing more).
+fn gained(now: &World, after: &World, a: &Action) -> Vec<Fact> {
+    let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+    let robot = now.character();
+    after
+        .facts_among(&ids)
+        .into_iter()
+        .filter(|f| !now.holds(f))
+        .filter(|f| !matches!(f, Fact::Edge { from, relation: Relation::Close, .. } if *from != robot))
+        .collect()
 }
 
 /// Whether a fact of `facts` that holds `now` does not hold `after`.

@@ -49,6 +49,9 @@ pub struct NodeView {
     pub rejected: Option<String>,
     /// Why a target subgoal's action cannot run yet (the executor's message, naming what to do first).
     pub blocked: Option<String>,
+    /// The steps the decision may write, each with what it would make true (shown last, next to
+    /// the question).
+    pub options: Option<String>,
 }
 
 /// Builds the prompts of one run.
@@ -89,6 +92,10 @@ impl Prompter {
         }
         if let Some(r) = &v.rejected {
             s.push_str(&format!("Rejected: {r}\n"));
+        }
+        if let Some(o) = &v.options {
+            s.push_str(o.trim_end());
+            s.push('\n');
         }
         s.push_str(DECOMPOSE_REQUEST);
         s

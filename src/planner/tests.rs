@@ -976,3 +976,84 @@ fn where_the_goals_are_kept_steps_that_change_nothing_are_not_offered_unless_the
     let g = &go(false, vec![]).grammars[1];
     assert!(admits(g, "LOOKAT", "<television> (31)") && admits(g, "TOUCH", "<television> (31)"), "{g}");
 }
+
+#[test]
+fn a_task_whose_goals_are_closeness_and_actions_is_under_the_goal_line_rules_too() {
+    use crate::action::Verb;
+    // Pet the cat: no state or relation to keep, one verb to do. Idle steps are skipped (TOUCH stays,
+    // named), and `done` needs the lines' threshold.
+    let line = "character is CLOSE to television";
+    let mut m = Scripted::new(&["action: [WALK] <television> (31)", "action: [TOUCH] <television> (31)", "done"]);
+    m.p_done = 0.3;
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest { named_verbs: vec![Verb::Touch], ..offered(&[line]) };
+    let cfg = PlannerConfig { lines_done_at: Some(0.5), ..PlannerConfig::default() };
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    let g = &m.grammars[1];
+    assert!(admits(g, "TOUCH", "<television> (31)") && !admits(g, "LOOKAT", "<television> (31)"), "{g}");
+    assert!(!g.contains("\"done\""), "p(done) 0.3 is below the lines' 0.5: {g}");
+    assert_eq!(plan_lines(&out)[..2], ["[WALK] <television> (31)", "[TOUCH] <television> (31)"]);
+}
+
+#[test]
+fn each_decision_is_shown_its_steps_with_what_they_would_make_true() {
+    let tv = "television is ON";
+    let go = |show_effects: bool| {
+        let mut m = Scripted::new(&["action: [SWITCHON] <television> (31)", "done"]);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let cfg = PlannerConfig { show_effects, ..defaults() };
+        plan(&mut m, &mut env, &offered(&[tv]), &cfg, &mut TraceWriter::sink());
+        m
+    };
+    let m = go(true);
+    let p = &m.prompts[0];
+    assert!(p.contains("Steps you can take, and what each makes true:"), "{p}");
+    // A target is shown with what its way and it make true; a walk with the robot's closeness only.
+    let switch_on = p.lines().find(|l| l.starts_with("[SWITCHON] <television> (31): ")).unwrap_or_else(|| panic!("{p}"));
+    assert!(switch_on.contains("television is ON"), "{switch_on}");
+    let walk = p.lines().find(|l| l.starts_with("[WALK] <television> (31): ")).unwrap_or_else(|| panic!("{p}"));
+    assert!(walk.contains("character is CLOSE to television") && !walk.contains("television is CLOSE"), "{walk}");
+    // Every step shown is one the grammar admits, and the list is the tail of the prompt.
+    assert!(admits(&m.grammars[0], "SWITCHON", "<television> (31)"));
+    assert!(p.trim_end().ends_with("Next step?"), "{p}");
+    assert!(!go(false).prompts[0].contains("Steps you can take"));
+}
+
+#[test]
+fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again_once() {
+    use crate::world::vocab::{Relation, State};
+    let closed = "fridge is CLOSED";
+    let go = |keep_goals: bool| {
+        let mut m = Scripted::new(&[
+            &format!("subgoal: {closed}"),
+            "action: [WALK] <fridge> (10)",
+            "done",
+            // The apple's line: its target's way opens the fridge.
+            "action: [PUTIN] <apple> (12) <fridge> (10)",
+            "done",
+            // The fridge's line again (the only line left: taken without a call).
+            "action: [CLOSE] <fridge> (10)",
+            "done",
+        ]);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest {
+            kept: vec![
+                Fact::State { id: 10, state: State::Closed },
+                Fact::Edge { from: 12, relation: Relation::Inside, to: 10 },
+            ],
+            ..offered(&[closed, APPLE_IN_FRIDGE])
+        };
+        let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    let (out, m) = go(true);
+    assert_eq!(out.stop, StopCause::Done);
+    let lines = plan_lines(&out);
+    assert!(lines.contains(&"[OPEN] <fridge> (10)".to_string()), "{lines:?}");
+    assert_eq!(lines.last().map(String::as_str), Some("[CLOSE] <fridge> (10)"), "{lines:?}");
+    assert_eq!(m.answers.len(), 0, "every answer was asked for");
+    // Without kept goals the line is not offered again: the fridge stays open.
+    let (out, _) = go(false);
+    assert_ne!(plan_lines(&out).last().map(String::as_str), Some("[CLOSE] <fridge> (10)"));
+}
