@@ -1,5 +1,6 @@
 //! Criterion micro-benchmarks of the runtime's three hot paths on a tiny random-weight model (always
-//! available) and, when installed, on SmolLM2: one decode step, a prefill, and one token mask.
+//! available) and, when installed, on SmolLM2 and Qwen2.5-Coder-0.5B: one decode step, a prefill,
+//! and one token mask.
 //! `step bench llm` gives the whole-pipeline figures on a real model.
 
 use std::path::PathBuf;
@@ -18,9 +19,12 @@ fn models() -> Vec<(String, PathBuf)> {
     let tiny = dir.join("tiny-llama.gguf");
     write_tiny_gguf(&TinySpec::llama(), &tiny).unwrap();
     let mut v = vec![("tiny".to_string(), tiny)];
-    let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models/SmolLM2-135M-Instruct.Q4_1.gguf");
-    if real.exists() {
-        v.push(("smollm2".to_string(), real));
+    let installed = [("smollm2", "SmolLM2-135M-Instruct.Q4_1.gguf"), ("qwen2.5-coder-0.5b", "Qwen2.5-Coder-0.5B-Instruct.Q4_K_M.gguf")];
+    for (name, file) in installed {
+        let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models").join(file);
+        if real.exists() {
+            v.push((name.to_string(), real));
+        }
     }
     v
 }

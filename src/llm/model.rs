@@ -162,12 +162,16 @@ fn fit(v: &mut Vec<f32>, n: usize) -> &mut [f32] {
 }
 
 /// The most tokens one forward pass runs together; longer inputs run in batches of this many.
-/// The scratch memory grows with the batch (76 KB a token for Qwen2.5-0.5B: 35 MB for the bench's
-/// 481-token prompt in one batch, 19 MB in batches of 256), and the speed hardly does: the
-/// kernels take the tokens 16 or 32 at a time anyway, and a batch costs one more pass over the
-/// weights. Measured on that prompt, 2 threads, alternating: 256 costs ~1% of prefill speed, 128
-/// (9 MB) ~4%.
-const MAX_BATCH: usize = 256;
+/// The scratch memory grows with the batch; each batch costs one more pass over the weights.
+/// Qwen2.5-0.5B's bench prompt (481 tokens), 2 threads, alternating, medians of 3 rounds: batches
+/// of 256 with the FFN whole peaked at 571 MiB and 380 tok/s; 128 with FFN_ROWS 64, at 558 MiB
+/// and 365 tok/s, which keeps the peak under the file's size plus 100 MB. A planner node's
+/// uncached tail is mostly shorter than one batch anyway.
+const MAX_BATCH: usize = 128;
+
+/// The FFN runs this many of a batch's tokens at a time: its two n_ff-wide activations are the
+/// largest scratch buffers (39 KB a token for Qwen2.5-0.5B).
+const FFN_ROWS: usize = 64;
 
 /// A loaded model and its KV cache: one sequence at a time, the planner's case.
 #[derive(Debug, Clone)]
@@ -357,12 +361,15 @@ impl Transformer {
             layer.attention(h, t, cfg, s);
             add(x, &s.o[..t * d]);
             rms_norm(x, &layer.ffn_norm, eps, h);
-            let (g, u) = (fit(&mut s.g, t * cfg.n_ff), fit(&mut s.u, t * cfg.n_ff));
-            s.q8.quantize(h, t, d);
-            matmul_many(&[(&layer.gate, &mut *g), (&layer.up, &mut *u)], &s.q8, h, t);
-            swiglu(g, u);
             let o = fit(&mut s.o, t * d);
-            matmul(&layer.down, g, t, &mut s.q8, o);
+            for (h, o) in h.chunks(FFN_ROWS * d).zip(o.chunks_mut(FFN_ROWS * d)) {
+                let r = h.len() / d;
+                let (g, u) = (fit(&mut s.g, r * cfg.n_ff), fit(&mut s.u, r * cfg.n_ff));
+                s.q8.quantize(h, r, d);
+                matmul_many(&[(&layer.gate, &mut *g), (&layer.up, &mut *u)], &s.q8, h, r);
+                swiglu(g, u);
+                matmul(&layer.down, g, r, &mut s.q8, o);
+            }
             add(x, o);
         }
         // Generation uses the last position's logits only: project that row alone.

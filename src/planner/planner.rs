@@ -238,6 +238,13 @@ impl Run<'_> {
         Ok(self.cfg.action_set(self.cfg.strength, self.world()?, &self.node_focus(node)?))
     }
 
+    /// Whether every object `a` names is in the run's focus: a plan names only the objects it was
+    /// given (EAI's scorer rejects any other as a hallucination), also on the way to a target (a
+    /// closed container of the target that is not in the focus blocks it).
+    fn in_focus(&self, a: &Action) -> bool {
+        a.args.iter().all(|o| self.focus.contains(&o.id))
+    }
+
     /// The objects a decision at `node` may name. With `subgoal_focus`: the focus objects the node's
     /// text names, by class name or `(id)`, with the objects holding them (inside or on), so a
     /// subgoal's choices are about what it is about; a text that names none keeps the whole focus.
@@ -296,7 +303,11 @@ impl Run<'_> {
             // nothing the task asks for, and (with `skip_idle`) not be an idle step itself (LOOKAT
             // by way of TURNTO).
             .filter(|a| {
-                let Some(before) = w.before_running(a) else { return false };
+                // (a way through an object outside the focus would name one the plan was not given)
+                let Some((way, before)) = w.way_to(a) else { return false };
+                if !way.iter().all(|s| self.in_focus(s)) {
+                    return false;
+                }
                 let Some(after) = trial(&before, a) else { return false };
                 changes_its_objects(w, &after, a)
                     && !(self.keeps_goals() && makes_false(&before, &after, &self.req.kept))
@@ -562,7 +573,9 @@ impl Run<'_> {
                 _ => None,
             };
             let actions = match (toward, actions) {
-                (Some(Some(step)), _) if !self.cfg.excluded_verbs.contains(&step.verb) => ActionSet::Exact(vec![step]),
+                (Some(Some(step)), _) if !self.cfg.excluded_verbs.contains(&step.verb) && self.in_focus(&step) => {
+                    ActionSet::Exact(vec![step])
+                }
                 (Some(_), _) => return Ok(End::Abandoned("unreachable")),
                 // Targets are written as actions: the model names the action it wants done, and one
                 // that cannot run yet becomes a subgoal worked out below it.

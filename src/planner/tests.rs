@@ -759,6 +759,24 @@ fn targets_are_not_offered_when_already_so_or_impossible_and_not_without_the_fla
 }
 
 #[test]
+fn a_target_whose_way_names_an_object_outside_the_focus_is_not_offered() {
+    // The demo plate lies in the closed kitchen cabinet: its way opens the cabinet.
+    let grammar_for = |focus: Vec<u32>| {
+        let mut m = Scripted::new(&["done"]);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest::new("put the plate on the kitchen table", focus);
+        plan(&mut m, &mut env, &req, &defaults(), &mut TraceWriter::sink());
+        m.grammars[0].clone()
+    };
+    let with_cabinet = grammar_for(vec![16, 17, 18]);
+    assert!(admits(&with_cabinet, "GRAB", "<plate> (17)"), "{with_cabinet}");
+    // Without the cabinet in the focus, the plan could reach the plate only by naming it.
+    let without = grammar_for(vec![17, 18]);
+    assert!(!admits(&without, "GRAB", "<plate> (17)"), "{without}");
+    assert!(admits(&without, "WALK", "<plate> (17)"), "{without}");
+}
+
+#[test]
 fn with_single_step_lines_a_goal_line_is_complete_after_its_one_step() {
     let lines = [APPLE_IN_FRIDGE, "television is ON"];
     let c = PlannerConfig { single_step_lines: true, ..defaults() };

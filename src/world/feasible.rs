@@ -61,13 +61,21 @@ impl World {
     /// The state the way to `target` leads to, just before `target` itself runs, on a copy (`None`:
     /// no way within 7 steps).
     pub fn before_running(&self, target: &Action) -> Option<World> {
+        self.way_to(target).map(|(_, w)| w)
+    }
+
+    /// The steps of the way to `target` (target excluded) and the state they lead to, on a copy
+    /// (`None`: no way within 7 steps). A planner limited to some objects checks the steps' objects.
+    pub fn way_to(&self, target: &Action) -> Option<(Vec<Action>, World)> {
         let mut w = self.clone();
+        let mut steps = Vec::new();
         for _ in 0..8 {
             let step = w.first_step_towards(target)?;
             if step == *target {
-                return Some(w);
+                return Some((steps, w));
             }
             w.execute(&step).ok()?;
+            steps.push(step);
         }
         None
     }
