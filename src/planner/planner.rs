@@ -898,9 +898,14 @@ impl Run<'_> {
     /// "now <fact>, …": what the last step changed, in the goal lines' words, when changes are
     /// reported and it changed any.
     fn change_report(&self) -> Option<String> {
-        let w = self.env.world().filter(|_| self.cfg.report_changes && !self.last_change.is_empty())?;
-        let facts: Vec<String> = self.last_change.iter().map(|f| w.describe(f)).collect();
+        let facts = self.last_change_words().filter(|_| self.cfg.report_changes)?;
         Some(format!("now {}", facts.join(", ")))
+    }
+
+    /// What the last step changed, in the goal lines' words (`None`: nothing, or no world to say it).
+    fn last_change_words(&self) -> Option<Vec<String>> {
+        let w = self.env.world().filter(|_| !self.last_change.is_empty())?;
+        Some(self.last_change.iter().map(|f| w.describe(f)).collect())
     }
 
     /// Records in `st` what the step that just ran changed, but holding and closeness (means, not
@@ -947,8 +952,7 @@ impl Run<'_> {
                     (Some(before), Some(w)) => w.facts_among(&ids).into_iter().filter(|f| !before.contains(f)).collect(),
                     _ => Vec::new(),
                 };
-                if let (false, Some(w)) = (self.last_change.is_empty(), self.env.world()) {
-                    let facts: Vec<String> = self.last_change.iter().map(|f| w.describe(f)).collect();
+                if let Some(facts) = self.last_change_words() {
                     self.trace.event("changed", json!({"node": child, "facts": facts}));
                 }
                 Ok(match (&outcome, self.change_report()) {
