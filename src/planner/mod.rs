@@ -193,6 +193,7 @@ pub struct PlannerConfig {
     /// Below a target subgoal the one step offered is the world's next step towards its action
     /// (`World::first_step_towards`: the step each failure names, followed back); the model chose the
     /// target, the embodiment knows the way. Off: the model chooses among the feasible actions.
+    /// Either way a target is offered only when its way names no object outside the run's focus.
     pub target_steps: bool,
     /// A goal line offered to the root is reached by one step: its node is complete once one child
     /// (an action, or a target whose action ran) has been accepted, instead of when the model says
