@@ -5,16 +5,21 @@
 //! - [`env`]: the [`Env`] trait leaves execute against (`sim`, `dry-run`; `bridge:CMD` in `bridge`).
 //! - [`trace`]: the JSON-lines trace, flushed per event.
 //! - [`prompt`]: the prompts (files under `prompts/`), ordered for prefix reuse.
-//! - [`planner`]: Algorithm 1 and the ablations' context modes.
+//! - [`planner`]: Algorithm 1 and the ablations' context modes; beside it `decompose` (the
+//!   subgoal decomposition model), `terminate` (the leaf-node termination model and the symbolic
+//!   check) and `rules` (what narrows their choices: fresh steps, protected changes, kept goals).
 //!
 //! [`plan`] is the one entry point for every planner kind.
 
 pub mod baseline;
 pub mod bridge;
+mod decompose;
 pub mod env;
 pub mod planner;
 pub mod prompt;
 pub mod replay;
+mod rules;
+mod terminate;
 pub mod trace;
 pub mod tree;
 
@@ -205,7 +210,7 @@ pub struct PlannerConfig {
     /// then only reject it for congruence). Off: the world's check is the verdict on actions, and the
     /// model judges subgoals only.
     pub judge_actions: bool,
-    /// Drop steps that repeat recent ones (see [`planner::fresh_steps`]; exact action sets only;
+    /// Drop steps that repeat recent ones (see `rules::fresh_steps`; exact action sets only;
     /// the random planner obeys it too).
     pub fresh_steps: bool,
     /// Say, after each step, what it changed among its objects in the goal lines' words ("ok, now

@@ -388,6 +388,29 @@ fn the_depth_budget_shapes_the_grammars() {
 }
 
 #[test]
+fn a_flat_plan_cut_by_the_token_limit_keeps_its_complete_lines() {
+    let flat = PlannerConfig { kind: PlannerKind::Flat, strength: Strength::Typed, ..defaults() };
+    let run_flat = |answer: LlmError| {
+        let w = World::demo();
+        let req = PlanRequest::new("put the apple in the fridge", w.nodes().map(|n| n.id).collect());
+        let mut m = Scripted::new(&[]);
+        m.answers = vec![Err(answer)].into();
+        let mut env = SimEnv::new(w, vec![]);
+        plan(&mut m, &mut env, &req, &flat, &mut TraceWriter::sink())
+    };
+    // Two complete lines and a third cut mid-way: the two run, the fragment is dropped.
+    let so_far = format!("{WALK_APPLE}\n{GRAB_APPLE}\n[WALK] <fri");
+    let out = run_flat(LlmError::TokenBudget { max_tokens: 64, so_far });
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.stop);
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE]);
+    assert_eq!(out.stats.llm_calls, 1);
+    // With no complete line there is no plan: the run ends with the error, naming the limit.
+    let out = run_flat(LlmError::TokenBudget { max_tokens: 8, so_far: "[WALK] <ap".into() });
+    assert!(matches!(&out.stop, StopCause::Error(e) if e.contains("after 8 tokens")), "{:?}", out.stop);
+    assert!(out.executed.is_empty());
+}
+
+#[test]
 fn a_token_budget_error_is_a_rejected_attempt_and_other_errors_end_the_run_with_the_trace_intact() {
     let too_long = || LlmError::TokenBudget { max_tokens: 48, so_far: "subgoal: a".into() };
     let mut m = Scripted::new(&[]);
@@ -574,13 +597,13 @@ fn fresh_steps_drop_repeats_only_while_something_else_is_left() {
     );
     let all = vec![walk_a.clone(), walk_f.clone(), grab_a.clone(), open_f.clone()];
     // Right after a walk: no walk.
-    assert_eq!(planner::fresh_steps(all.clone(), &[walk_a.clone()], &[]), [grab_a.clone(), open_f.clone()]);
+    assert_eq!(rules::fresh_steps(all.clone(), &[walk_a.clone()], &[]), [grab_a.clone(), open_f.clone()]);
     // The run's last three actions, and what this node has done, are not offered again.
     let ran = [open_f.clone(), walk_f.clone(), grab_a.clone()];
-    assert_eq!(planner::fresh_steps(all.clone(), &ran, &[]), [walk_a.clone()]);
-    assert_eq!(planner::fresh_steps(all.clone(), &[], &[walk_a.clone(), open_f.clone()]), [walk_f.clone(), grab_a.clone()]);
+    assert_eq!(rules::fresh_steps(all.clone(), &ran, &[]), [walk_a.clone()]);
+    assert_eq!(rules::fresh_steps(all.clone(), &[], &[walk_a.clone(), open_f.clone()]), [walk_f.clone(), grab_a.clone()]);
     // Nothing left: everything stays on offer (the rule never leaves a node without a step).
-    assert_eq!(planner::fresh_steps(vec![walk_f.clone()], &[walk_a.clone()], &[walk_f.clone()]), [walk_f]);
+    assert_eq!(rules::fresh_steps(vec![walk_f.clone()], &[walk_a.clone()], &[walk_f.clone()]), [walk_f]);
 }
 
 const APPLE_IN_FRIDGE: &str = "apple is INSIDE to fridge";
@@ -683,15 +706,15 @@ fn the_random_chooser_walks_the_offered_lines_with_a_fixed_number_of_steps_each(
 fn named_objects_match_class_names_as_words_and_ids() {
     let w = World::demo();
     let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-    let mut got = planner::named_objects(&w, &all, "apple is INSIDE to fridge");
+    let mut got = decompose::named_objects(&w, &all, "apple is INSIDE to fridge");
     got.sort();
     assert_eq!(got, [10, 12]);
     // "light" names both lights; "lightswitch" is another word.
-    let mut lights = planner::named_objects(&w, &all, "light is OFF");
+    let mut lights = decompose::named_objects(&w, &all, "light is OFF");
     lights.sort();
     assert_eq!(lights, [23, 35]);
-    assert_eq!(planner::named_objects(&w, &all, "take <plate> (17)"), [17]);
-    assert!(planner::named_objects(&w, &all, "character is SITTING").is_empty());
+    assert_eq!(decompose::named_objects(&w, &all, "take <plate> (17)"), [17]);
+    assert!(decompose::named_objects(&w, &all, "character is SITTING").is_empty());
 }
 
 #[test]

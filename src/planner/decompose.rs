@@ -1,0 +1,419 @@
+//! The subgoal decomposition model (the paper's section III-B): at a node, what the next child may
+//! be and the model's choice of it. The grammar is built before every decision from the embodiment
+//! and the live world: the actions that can run now (narrowed by the rules in `rules`), the targets
+//! the world knows a way to, the task's goal lines at the root, and `done`. The model sees the
+//! node's goal, its previous sibling and the observation only (`Run::view`); the `random` planner
+//! draws from the same grammar instead.
+
+use std::time::Instant;
+
+use rand::Rng;
+use serde_json::json;
+
+use super::planner::{grammar_error, prompt_hash, ContextMode, End, NodeLoop, Run};
+use super::prompt::NodeView;
+use super::rules::{changes_its_objects, fresh_steps, gained, makes_false, recent, trial, changes_nothing};
+use super::tree::NodeId;
+use super::{ActionChoice, CallRecord, StopCause};
+use crate::action::{Action, Verb};
+use crate::grammar::{ActionSet, DecomposeGrammar, Proposal, Strength};
+use crate::llm::engine::{Prompt, Score};
+use crate::scene_grammar::typed_actions;
+use crate::world::vocab::Relation;
+use crate::world::World;
+
+/// What a decision at a node may write: the decomposition grammar, the targets among its actions
+/// (one chosen becomes a subgoal worked towards below it), and how `done` is judged there.
+pub(super) struct Menu {
+    pub(super) grammar: DecomposeGrammar,
+    pub(super) targets: Vec<Action>,
+    /// The model is done when its probability of `done` reaches this (see `PlannerConfig::done_at`).
+    done_at: Option<f64>,
+    /// Below `done_at`, `done` leaves the grammar (goal lines with the goals kept).
+    strict: bool,
+}
+
+/// The decomposition model's answer to one decision.
+pub(super) enum Proposed {
+    /// What it wrote, and that parsed.
+    Text(String, Proposal),
+    /// The random chooser had nothing to draw and `done` was not offered: the node is given up.
+    Nothing,
+    /// The grammar was not complete within the token cap: a rejected attempt.
+    TokenLimit,
+}
+
+impl Run<'_> {
+    /// What the decision at `node` may write (its grammar) and how `done` is judged there, or how
+    /// the node ends without a decision: a target with no way left to its action is given up, and a
+    /// root whose offered goal lines were all taken is complete.
+    ///
+    /// The actions are the grammar strength's set over the node's objects, narrowed by the rules
+    /// (`rules`); beside them the node's targets, and at the root the goal lines not yet taken.
+    pub(super) fn menu(
+        &mut self,
+        node: NodeId,
+        target: Option<&Action>,
+        st: &mut NodeLoop,
+        view: &mut NodeView,
+    ) -> Result<Result<Menu, End>, StopCause> {
+        let depth = self.tree.node(node).depth;
+        let max_depth = self.cfg.budgets.max_depth;
+        let is_root = node == self.tree.root();
+        // An action this node has just rejected is not proposed again until the state changes;
+        // only exact sets can drop one. With `fresh_steps`, steps that repeat recent ones are
+        // dropped too; without, at least the action the node has just executed (a greedy tiny
+        // model otherwise repeats one step forever).
+        let set = self.action_set(node)?;
+        // The root's subgoals are the request's offered lines (a task's goals in words) not yet
+        // taken; once all are taken it proposes actions or `done`.
+        let offered = is_root && !self.req.subgoals.is_empty();
+        let may_target = target.is_none() && !offered && depth + 1 < max_depth && !st.concrete_only;
+        let targets = self.target_menu(node, &set, may_target, st)?;
+        let actions = match set {
+            ActionSet::Exact(list) => {
+                let list: Vec<Action> = list.into_iter().filter(|a| !st.refused.contains(a)).collect();
+                ActionSet::Exact(if self.cfg.fresh_steps {
+                    let fresh = fresh_steps(list, &self.executed, &st.done_here);
+                    // A node that has taken steps and has nothing new left to do is offered
+                    // `done` (or a subgoal) rather than a repeat.
+                    let recent = recent(&self.executed);
+                    if st.accepted > 0 && fresh.iter().all(|a| st.done_here.contains(a) || recent.contains(a)) {
+                        Vec::new()
+                    } else {
+                        fresh
+                    }
+                } else {
+                    list.into_iter().filter(|a| st.done_here.last() != Some(a)).collect()
+                })
+            }
+            set => set,
+        };
+        let actions = self.keep_what_is_done(actions, st, is_root)?;
+        // With target steps, a target node's one step is the world's next step towards its action.
+        let toward = match (target, self.cfg.target_steps) {
+            (Some(t), true) => Some(self.world()?.first_step_towards(t)),
+            _ => None,
+        };
+        let actions = match (toward, actions) {
+            (Some(Some(step)), _) if !self.cfg.excluded_verbs.contains(&step.verb) && self.in_focus(&step) => {
+                ActionSet::Exact(vec![step])
+            }
+            (Some(_), _) => return Ok(Err(End::Abandoned("unreachable"))),
+            // Targets are written as actions: the model names the action it wants done, and one
+            // that cannot run yet becomes a subgoal worked out below it.
+            (None, ActionSet::Exact(mut list)) if !targets.is_empty() => {
+                list.extend(targets.iter().cloned());
+                ActionSet::Exact(list)
+            }
+            (None, actions) => actions,
+        };
+        if offered && self.keeps_goals() {
+            self.undone_lines(st)?;
+        }
+        let subgoal_menu: Vec<String> = if offered {
+            self.req.subgoals.iter().filter(|l| !st.tried.contains(l)).cloned().collect()
+        } else {
+            Vec::new()
+        };
+        // A root whose offered subgoals have all been taken is complete: its decomposition was
+        // the goal lines, and each was done or given up below it.
+        if offered && subgoal_menu.is_empty() {
+            return Ok(Err(End::Complete));
+        }
+        // With target subgoals, a node's only subgoals are its targets (free text is not offered:
+        // tiny models' own subgoals were found to echo or drift), and a target node proposes
+        // actions only.
+        let with_targets = self.cfg.target_subgoals && !offered && self.cfg.strength == Strength::Feasible;
+        let allow_subgoal = self.mode != ContextMode::NoSubgoalTree
+            && depth + 1 < max_depth
+            // (a root with lines left takes the next one: a taken line is never offered again)
+            && (!st.concrete_only || offered)
+            && target.is_none()
+            && !with_targets
+            && !self.under_offered(node)
+            && (!offered || !subgoal_menu.is_empty());
+        // `done` before any step would end a goal with nothing done; it is offered once a child
+        // has been accepted, once every offered subgoal was taken, or when nothing else can be
+        // written.
+        // (a target node with target steps ends when its action runs, not when the model says so)
+        // A root shown goal lines is decomposed into them: it is not done while one is left to take.
+        let allow_done = !(target.is_some() && self.cfg.target_steps)
+            && !(offered && allow_subgoal)
+            && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()));
+        // While offered lines remain, the root decomposes into them (actions come below them):
+        // given the choice, both models wrote actions at the root and never took a line.
+        let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
+        if self.cfg.show_effects {
+            view.options = self.effects_menu(&actions, &targets)?;
+        }
+        // Where the goals are kept, `lines_done_at` judges `done` (strictly: below it the model
+        // may not write it); elsewhere `done_at` (below it the model may still write it).
+        let (done_at, strict) = if self.keeps_goals() {
+            (self.cfg.lines_done_at, self.cfg.lines_done_at.is_some())
+        } else {
+            (self.cfg.done_at, false)
+        };
+        let grammar = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done, subgoal_menu };
+        Ok(Ok(Menu { grammar, targets, done_at, strict }))
+    }
+
+    /// The decomposition model's answer to a decision (or the random chooser's): a decision with
+    /// exactly one admissible answer asks no model; where `done` may be answered the model is first
+    /// scored on it (`done_check`); then it writes under the grammar, and with `--choose score` its
+    /// action is replaced by the likeliest admitted one (`rank`).
+    pub(super) fn propose(&mut self, node: NodeId, menu: &Menu, view: &NodeView, st: &NodeLoop) -> Result<Proposed, StopCause> {
+        let dg = &menu.grammar;
+        let lark = dg.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?;
+        let prompt = self.prompter.decompose(view);
+        let text = if let Some(line) = dg.only_choice() {
+            // One admissible answer: asking a model (or drawing) could not change it.
+            line
+        } else if self.rng.is_some() {
+            match self.draw(dg, st) {
+                Some(t) => t,
+                None => return Ok(Proposed::Nothing),
+            }
+        } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal, menu.done_at)? {
+            "done".to_string()
+        } else {
+            // Below the goal lines' threshold the model is not done: `done` leaves the grammar
+            // (while anything else can be written).
+            let something_else = dg.allow_subgoal || !matches!(&dg.actions, ActionSet::Exact(l) if l.is_empty());
+            let lark = if dg.allow_done && menu.strict && something_else {
+                let no_done = DecomposeGrammar { allow_done: false, ..dg.clone() };
+                no_done.to_lark().map_err(|e| StopCause::Error(format!("decomposition grammar: {e}")))?
+            } else {
+                lark
+            };
+            let Some(text) = self.call("decompose", node, &prompt, &lark)? else {
+                return Ok(Proposed::TokenLimit);
+            };
+            text
+        };
+        let proposal = dg.parse(&text).map_err(|e| grammar_error("decompose", node, &text, &e.to_string()))?;
+        let proposal = match proposal {
+            Proposal::Action(a) if self.cfg.choose == ActionChoice::Score => {
+                Proposal::Action(self.rank(node, &prompt, &dg.actions, a)?)
+            }
+            p => p,
+        };
+        Ok(Proposed::Text(text, proposal))
+    }
+
+    /// Whether `node` is one of the root's offered goal lines: below one the node proposes actions
+    /// (the line already is the subgoal and names its objects; tiny models' own subgoals there were
+    /// found to drift off them).
+    pub(super) fn under_offered(&self, node: NodeId) -> bool {
+        let n = self.tree.node(node);
+        node != self.tree.root() && n.parent == Some(self.tree.root()) && self.req.subgoals.contains(&n.text)
+    }
+
+    /// Whether every object `a` names is in the run's focus: a plan names only the objects it was
+    /// given (EAI's scorer rejects any other as a hallucination), also on the way to a target (a
+    /// closed container of the target that is not in the focus blocks it).
+    pub(super) fn in_focus(&self, a: &Action) -> bool {
+        a.args.iter().all(|o| self.focus.contains(&o.id))
+    }
+
+    /// The objects a decision at `node` may name. With `subgoal_focus`: the focus objects the node's
+    /// text names, by class name or `(id)`, with the objects holding them (inside or on), so a
+    /// subgoal's choices are about what it is about; a text that names none keeps the whole focus.
+    /// The root does so only when its focus is the whole scene.
+    pub(super) fn node_focus(&self, node: NodeId) -> Result<Vec<u32>, StopCause> {
+        // The root keeps a focus the request narrowed (a task's relevant objects); over the whole
+        // scene, it too is narrowed to what its instruction names.
+        if !self.cfg.subgoal_focus || (node == self.tree.root() && !self.focus_is_scene) {
+            return Ok(self.focus.clone());
+        }
+        let w = self.world()?;
+        let named = named_objects(w, &self.focus, &self.tree.node(node).text);
+        if named.is_empty() {
+            return Ok(self.focus.clone());
+        }
+        let mut out = named.clone();
+        for (from, r, to) in w.edges() {
+            if named.contains(&from)
+                && matches!(r, Relation::Inside | Relation::On)
+                && self.focus.contains(&to)
+                && !out.contains(&to)
+                && !w.node(to).is_some_and(|n| n.is_room())
+            {
+                out.push(to);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The target subgoals a decision at `node` may write: the actions of the
+    /// `typed` set over the node's objects that cannot run now (the runnable ones are offered as
+    /// actions) and that the world knows a way to, moves left out (a walk is never out of reach),
+    /// each taken at most once per node, and only those that change something among their objects.
+    /// `feasible` is the node's feasible set. Empty unless `PlannerConfig::target_subgoals` and
+    /// the feasible grammar are on and the node may have subgoals at all (`allowed`).
+    fn target_menu(
+        &self,
+        node: NodeId,
+        feasible: &ActionSet,
+        allowed: bool,
+        st: &NodeLoop,
+    ) -> Result<Vec<Action>, StopCause> {
+        let ActionSet::Exact(feasible) = feasible else { return Ok(Vec::new()) };
+        if !allowed || !self.cfg.target_subgoals || self.mode == ContextMode::NoSubgoalTree {
+            return Ok(Vec::new());
+        }
+        let w = self.world()?;
+        // Only targets the world knows a way to: not an affordance error, not already so.
+        let menu = typed_actions(w, &self.node_focus(node)?)
+            .into_iter()
+            .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
+            .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))
+            .filter(|a| !st.tried.contains(&a.to_string()))
+            // A target is judged by its own action, in the state its way leads to (one walk of the
+            // way and one trial per candidate): it must change something among its objects, undo
+            // nothing the task asks for, and (with `skip_idle`) not be an idle step itself (LOOKAT
+            // by way of TURNTO).
+            .filter(|a| {
+                // (a way through an object outside the focus would name one the plan was not given)
+                let Some((way, before)) = w.way_to(a) else { return false };
+                if !way.iter().all(|s| self.in_focus(s)) {
+                    return false;
+                }
+                let Some(after) = trial(&before, a) else { return false };
+                changes_its_objects(w, &after, a)
+                    && !(self.keeps_goals() && makes_false(&before, &after, &self.req.kept))
+                    && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
+            })
+            .collect();
+        Ok(menu)
+    }
+
+    /// Whether the model is done at `node` by its own probability of `done` as its answer's first
+    /// word (see `PlannerConfig::done_at`). A model that cannot score leaves it to generation.
+    fn done_check(&mut self, node: NodeId, prompt: &Prompt, subgoals: bool, at: Option<f64>) -> Result<bool, StopCause> {
+        let Some(at) = at else { return Ok(false) };
+        self.check_global()?;
+        let mut words = vec!["done".to_string(), "action:".to_string()];
+        if subgoals {
+            words.push("subgoal:".to_string());
+        }
+        let hash = prompt_hash(prompt, &words.join("\n"));
+        let t = Instant::now();
+        let scoring = match self.model.score(prompt, &words) {
+            Ok(s) => s,
+            Err(e) => {
+                self.trace.event("call_error", json!({"role": "done_check", "node": node, "prompt_hash": hash,
+                    "kind": "no_score", "error": e.to_string()}));
+                return Ok(false);
+            }
+        };
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        // The share of `done` among the answers' first words.
+        let odds: Vec<f64> = scoring.scores.iter().map(|s| s.logprob.exp()).collect();
+        let p = odds[0] / odds.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+        let done = p >= at;
+        self.record(CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms));
+        self.trace.event("done_check", json!({"node": node, "p_done": (p * 1000.0).round() / 1000.0, "done": done}));
+        Ok(done)
+    }
+
+    /// The action of an `action:` proposal chosen by likelihood: every action of an exact set is
+    /// scored whole as the proposal line, and the best per token wins (the first on a tie). Other
+    /// sets, or a single choice, keep the `written` action.
+    fn rank(&mut self, node: NodeId, prompt: &Prompt, set: &ActionSet, written: Action) -> Result<Action, StopCause> {
+        let ActionSet::Exact(list) = set else { return Ok(written) };
+        if list.len() < 2 {
+            return Ok(written);
+        }
+        self.check_global()?;
+        let lines: Vec<String> = list.iter().map(|a| format!("action: {a}")).collect();
+        let hash = prompt_hash(prompt, &lines.join("\n"));
+        let t = Instant::now();
+        let scoring = self.model.score(prompt, &lines).map_err(|e| {
+            self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
+                "kind": "error", "error": e.to_string()}));
+            StopCause::Error(format!("score call at node {node}: {e}"))
+        })?;
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        let mut best = 0;
+        for (i, s) in scoring.scores.iter().enumerate() {
+            if s.mean() > scoring.scores[best].mean() {
+                best = i;
+            }
+        }
+        self.record(CallRecord::of_scoring(node, hash, &scoring, &lines[best], total_ms));
+        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(Score::mean).zip(lines.iter().map(String::as_str)).collect();
+        top.sort_by(|a, b| b.0.total_cmp(&a.0));
+        self.trace.event("scores", json!({"node": node, "written": format!("action: {written}"),
+            "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
+        Ok(list[best].clone())
+    }
+
+    /// The options of a decision with their effects (see `PlannerConfig::show_effects`): each
+    /// action it may write, with the facts among its objects and the robot that running it (a
+    /// target: its way, then it) would make true, in the goal lines' words.
+    fn effects_menu(&self, actions: &ActionSet, targets: &[Action]) -> Result<Option<String>, StopCause> {
+        let ActionSet::Exact(list) = actions else { return Ok(None) };
+        if list.is_empty() {
+            return Ok(None);
+        }
+        let w = self.world()?;
+        let mut s = String::from("Steps you can take, and what each makes true:\n");
+        for a in list.iter().take(MAX_SHOWN_STEPS) {
+            let after = if targets.contains(a) { w.before_running(a).and_then(|b| trial(&b, a)) } else { trial(w, a) };
+            let facts: Vec<String> = after.map(|after| gained(w, &after, a)).unwrap_or_default().iter().take(3).map(|f| w.describe(f)).collect();
+            if facts.is_empty() {
+                s.push_str(&format!("{a}: nothing new\n"));
+            } else {
+                s.push_str(&format!("{a}: {}\n", facts.join(", ")));
+            }
+        }
+        Ok(Some(s))
+    }
+
+    /// The `random` planner's decomposition, in place of the model's (it walks the tree only when
+    /// subgoals are offered; see `planner::plan`): at the root, an offered line not yet taken, drawn
+    /// uniformly; below it, a uniform draw among the admitted actions until the node has executed
+    /// `random_steps` of them (or none is left), then `done`. Its only stopping rule is that fixed
+    /// length: nothing in it looks at the goals' state.
+    /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
+    fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
+        let rng = self.rng.as_mut().expect("draw is called for the random planner only");
+        if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
+            return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
+        }
+        // Steps taken below this node count, in its target subgoals too; targets are among the
+        // actions, so one uniform draw covers both.
+        if self.executed.len() - st.start_actions >= self.cfg.random_steps {
+            return dg.allow_done.then(|| "done".to_string());
+        }
+        match super::baseline::draw(&dg.actions, rng) {
+            Some(a) => Some(format!("action: {a}")),
+            None => dg.allow_done.then(|| "done".to_string()),
+        }
+    }
+}
+
+/// The objects of `focus` that `text` names: by class name (a whole word, case-insensitive) or by id
+/// written as `(id)`. The robot itself ("character is SITTING") is not an object its actions name.
+pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
+    let words: Vec<String> = text
+        .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .filter(|w| !w.is_empty())
+        .map(str::to_lowercase)
+        .collect();
+    focus
+        .iter()
+        .copied()
+        .filter(|&id| id != w.character())
+        .filter(|&id| {
+            text.contains(&format!("({id})"))
+                || w.node(id).is_some_and(|n| words.iter().any(|x| *x == n.class_name.to_lowercase()))
+        })
+        .collect()
+}
+
+/// The most steps [`Run::effects_menu`] shows (a prompt's tail stays a few hundred tokens).
+const MAX_SHOWN_STEPS: usize = 24;

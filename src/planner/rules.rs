@@ -1,0 +1,173 @@
+//! The rules over the world that narrow what a decision is offered, each a flag of
+//! `PlannerConfig`, each obeyed by the random chooser too so that figures stay comparable: fresh
+//! steps (no repeats), protected changes (a node does not undo its own work), kept goals (nothing
+//! the shown goals ask for is undone), idle steps (none that change nothing). They try candidates
+//! on a copy of the world. None of them ends a run or a line: when to stop stays the model's
+//! decision.
+
+use serde_json::json;
+
+use super::planner::{NodeLoop, Run};
+use super::StopCause;
+use crate::action::{Action, Verb};
+use crate::grammar::ActionSet;
+use crate::world::vocab::Relation;
+use crate::world::{Fact, World};
+
+impl Run<'_> {
+    /// The actions of `set` (an exact set) that undo nothing to keep and, below the root, are not
+    /// idle: neither what this node's steps changed (`protect_changes`) nor what the task asks for
+    /// (`keep_goals`) is made false, and a step that would change nothing is left out
+    /// (`skip_idle`). One trial of each candidate on a copy of the world answers all three; one
+    /// that cannot run is left to the checks after.
+    pub(super) fn keep_what_is_done(&self, set: ActionSet, st: &NodeLoop, is_root: bool) -> Result<ActionSet, StopCause> {
+        let mut protected: Vec<Fact> = Vec::new();
+        if self.cfg.protect_changes {
+            protected.extend(st.established.iter().cloned());
+        }
+        if self.keeps_goals() {
+            protected.extend(self.req.kept.iter().cloned());
+        }
+        let idle_rule = !is_root && self.idle_rule();
+        let ActionSet::Exact(list) = set else { return Ok(set) };
+        if protected.is_empty() && !idle_rule {
+            return Ok(ActionSet::Exact(list));
+        }
+        let w = self.world()?;
+        let keep = |a: &Action| {
+            trial(w, a).is_none_or(|after| {
+                !makes_false(w, &after, &protected) && !(idle_rule && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
+            })
+        };
+        Ok(ActionSet::Exact(list.into_iter().filter(|a| keep(a)).collect()))
+    }
+
+    /// Whether the rules for shown goals apply (see `PlannerConfig::keep_goals`): steps that undo
+    /// what the task asks for are left out, and with them idle steps and `lines_done_at`. A task
+    /// whose goals are only closeness and actions (pet the cat: be close to it, TOUCH it) keeps no
+    /// fact, yet its lines are goal lines all the same.
+    pub(super) fn keeps_goals(&self) -> bool {
+        self.cfg.keep_goals && (!self.req.kept.is_empty() || !self.req.named_verbs.is_empty())
+    }
+
+    /// Whether idle steps are left out at all (`PlannerConfig::skip_idle`, where the goals are kept).
+    fn idle_rule(&self) -> bool {
+        self.cfg.skip_idle && self.keeps_goals()
+    }
+
+    /// Whether a step of `verb` that changes nothing is left out: under the idle rule, unless the
+    /// goals name the verb as an action the plan must include.
+    pub(super) fn skips_idle(&self, verb: Verb) -> bool {
+        self.idle_rule() && !self.req.named_verbs.contains(&verb)
+    }
+
+    /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).
+    pub(super) fn line_fact(&self, line: &str) -> Option<&Fact> {
+        let w = self.env.world()?;
+        self.req.kept.iter().find(|f| w.describe(f) == line)
+    }
+
+    /// Where the goals are kept: a goal line that was met when done, and whose fact a later step
+    /// has made false (a target's way: SWITCHOFF of a dishwasher that is to be on, to open it and
+    /// put the plates in), is offered to the root again, once. Not a stop rule: it only lets the
+    /// root take a line again that its own steps undid; lines given up are not offered again.
+    pub(super) fn undone_lines(&mut self, st: &mut NodeLoop) -> Result<(), StopCause> {
+        let w = self.world()?;
+        let undone: Vec<String> = st
+            .met_lines
+            .iter()
+            .filter(|l| !st.reoffered.contains(l))
+            .filter(|l| self.line_fact(l).is_some_and(|f| !w.holds(f)))
+            .cloned()
+            .collect();
+        for line in undone {
+            st.tried.retain(|t| *t != line);
+            st.met_lines.retain(|t| *t != line);
+            self.trace.event("reoffered", json!({"line": line, "why": "a later step made it false"}));
+            st.reoffered.push(line);
+        }
+        Ok(())
+    }
+
+    /// Records in `st` what the step that just ran changed, but holding and closeness (means, not
+    /// ends: a grab is undone by the put it was for).
+    pub(super) fn establish(&self, st: &mut NodeLoop) {
+        let means = |f: &Fact| is_edge(f, &[Relation::HoldsRh, Relation::HoldsLh, Relation::Close]);
+        st.established.extend(self.last_change.iter().filter(|f| !means(f)).cloned());
+    }
+}
+
+/// The choices without the steps that repeat earlier ones, when anything else can be done: a walk
+/// (or run) right after one (the first was pointless), any of the run's last [`RECENT`] actions, and
+/// any action the node has already executed (`done_here`): the STEP context shows a node only its
+/// previous step, so a greedy model that comes back to a state it has seen makes the same choice
+/// again and cycles. The embodiment's rule, not a task's; every planner that chooses actions one at a
+/// time obeys it, the random one included, so figures stay comparable.
+pub(crate) fn fresh_steps(list: Vec<Action>, executed: &[Action], done_here: &[Action]) -> Vec<Action> {
+    let moves = |a: &Action| matches!(a.verb, Verb::Walk | Verb::Run);
+    let after_move = executed.last().is_some_and(moves);
+    let recent = recent(executed);
+    let fresh: Vec<Action> = list
+        .iter()
+        .filter(|a| !(after_move && moves(a)) && !recent.contains(a) && !done_here.contains(a))
+        .cloned()
+        .collect();
+    if fresh.is_empty() {
+        list
+    } else {
+        fresh
+    }
+}
+
+/// How many of the run's latest actions [`fresh_steps`] keeps from being chosen again.
+pub const RECENT: usize = 3;
+
+/// The run's last [`RECENT`] actions.
+pub(super) fn recent(executed: &[Action]) -> &[Action] {
+    &executed[executed.len().saturating_sub(RECENT)..]
+}
+
+/// The facts among `a`'s objects and the robot that hold `after` it and not `now`, closeness only
+/// as the robot's (the object's mirror of it says nothing more).
+pub(super) fn gained(now: &World, after: &World, a: &Action) -> Vec<Fact> {
+    let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+    let robot = now.character();
+    after
+        .facts_among(&ids)
+        .into_iter()
+        .filter(|f| !now.holds(f))
+        .filter(|f| !matches!(f, Fact::Edge { from, relation: Relation::Close, .. } if *from != robot))
+        .collect()
+}
+
+/// Whether the state `after` a target's way holds a fact among the target's objects that does not
+/// hold now, closeness aside: a target that changes nothing (putting the apple back where it lies,
+/// by way of a grab) is no subgoal.
+pub(super) fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
+    gained(now, after, target).iter().any(|f| !is_edge(f, &[Relation::Close]))
+}
+
+/// Whether a fact of `facts` that holds `now` does not hold `after`.
+pub(super) fn makes_false(now: &World, after: &World, facts: &[Fact]) -> bool {
+    facts.iter().any(|f| now.holds(f) && !after.holds(f))
+}
+
+/// The world after running `a` on a copy of `w`, if it can run.
+pub(super) fn trial(w: &World, a: &Action) -> Option<World> {
+    let mut after = w.clone();
+    after.execute(a).ok()?;
+    Some(after)
+}
+
+/// Whether the facts among `a`'s objects and the robot are the same `after` it as `now` (nothing
+/// gained, nothing lost).
+pub(super) fn changes_nothing(now: &World, after: &World, a: &Action) -> bool {
+    let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+    let (before, then) = (now.facts_among(&ids), after.facts_among(&ids));
+    before.len() == then.len() && then.iter().all(|f| before.contains(f))
+}
+
+/// Whether `f` is an edge of one of these relations.
+pub(super) fn is_edge(f: &Fact, relations: &[Relation]) -> bool {
+    matches!(f, Fact::Edge { relation, .. } if relations.contains(relation))
+}
