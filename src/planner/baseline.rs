@@ -289,7 +289,7 @@ pub fn flat(
     let total_ms = call_t0.elapsed().as_secs_f64() * 1e3;
     // The plan grammar is line by line, so when the token limit cuts a long plan (a tiny model
     // that repeats one line to the line cap) every complete line written is still a valid step:
-    // the plan is those lines, as EAI's scorer takes a cut-off answer, and the trace says so.
+    // the plan is those lines (a robot would run them the same way), and the trace says so.
     let text = match generated {
         Ok(g) => {
             let rec = CallRecord::of("flat", root, prompt_hash, &g, total_ms);
