@@ -187,6 +187,11 @@ pub struct DecisionArgs {
     /// no gain measured with SmolLM2, at three times the time a call.
     #[arg(long)]
     pub show_effects: bool,
+    /// Where the protocol shows no goals (`objects`, `instruction`, `step plan`), the root first
+    /// sets its own goal lines, choosing one at a time among what the world can state about its
+    /// objects ("fridge is CLOSED", "apple is INSIDE to fridge", "WATCH"), until it says done.
+    #[arg(long)]
+    pub infer_goals: bool,
 }
 
 /// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
@@ -218,5 +223,6 @@ impl DecisionArgs {
         cfg.done_at = (!self.no_done_check).then_some(self.done_at);
         cfg.lines_done_at = (!self.no_done_check).then_some(self.lines_done_at);
         cfg.show_effects = self.show_effects;
+        cfg.infer_goals = self.infer_goals;
     }
 }

@@ -75,6 +75,10 @@ pub struct PlanArgs {
     /// 6 → 31-35, 10 → 49-51, 15 → 44).
     #[arg(long, default_value_t = 10)]
     pub random_steps: usize,
+    /// With `--infer-goals`: goal lines the random planner sets at the root, drawn uniformly among
+    /// the candidates, before it says `done` there.
+    #[arg(long, default_value_t = 2)]
+    pub random_lines: usize,
     /// Most actions a run may send to the executor.
     #[arg(long, default_value_t = 60)]
     pub max_actions: usize,
@@ -171,6 +175,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             random_seed: a.seed,
             random_actions: a.random_actions,
             random_steps: a.random_steps,
+            random_lines: a.random_lines,
             excluded_verbs: if source.tasks_file.is_none() && !a.all_verbs {
                 crate::eval::plans::EAI_UNSCOREABLE.to_vec()
             } else {

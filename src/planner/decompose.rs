@@ -11,6 +11,7 @@ use rand::Rng;
 use serde_json::json;
 
 use super::planner::{grammar_error, prompt_hash, ContextMode, End, NodeLoop, Run};
+use super::goals;
 use super::prompt::NodeView;
 use super::rules::{changes_its_objects, fresh_steps, gained, makes_false, recent, trial, changes_nothing};
 use super::tree::NodeId;
@@ -31,6 +32,8 @@ pub(super) struct Menu {
     done_at: Option<f64>,
     /// Below `done_at`, `done` leaves the grammar (goal lines with the goals kept).
     strict: bool,
+    /// The answer is the likeliest whole line of the menu (a root setting its own goals).
+    whole: bool,
 }
 
 /// The decomposition model's answer to one decision.
@@ -67,7 +70,7 @@ impl Run<'_> {
         let set = self.action_set(node)?;
         // The root's subgoals are the request's offered lines (a task's goals in words) not yet
         // taken; once all are taken it proposes actions or `done`.
-        let offered = is_root && !self.req.subgoals.is_empty();
+        let offered = is_root && !self.goals.lines.is_empty();
         let may_target = target.is_none() && !offered && depth + 1 < max_depth && !st.concrete_only;
         let targets = self.target_menu(node, &set, may_target, st)?;
         let actions = match set {
@@ -112,7 +115,8 @@ impl Run<'_> {
             self.undone_lines(st)?;
         }
         let subgoal_menu: Vec<String> = if offered {
-            self.req.subgoals.iter().filter(|l| !st.tried.contains(l)).cloned().collect()
+            // (a line that contradicts one the root set itself is no longer offered)
+            self.goals.lines.iter().filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l)).cloned().collect()
         } else {
             Vec::new()
         };
@@ -138,24 +142,37 @@ impl Run<'_> {
         // written.
         // (a target node with target steps ends when its action runs, not when the model says so)
         // A root shown goal lines is decomposed into them: it is not done while one is left to take.
-        let allow_done = !(target.is_some() && self.cfg.target_steps)
-            && !(offered && allow_subgoal)
-            && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()));
+        // A root choosing its own goal lines (`infer_goals`) is done when the model says so, once
+        // it has taken one.
+        let inferring = offered && self.goals.inferred;
+        let allow_done = if inferring {
+            !st.tried.is_empty()
+        } else {
+            !(target.is_some() && self.cfg.target_steps)
+                && !(offered && allow_subgoal)
+                && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()))
+        };
         // While offered lines remain, the root decomposes into them (actions come below them):
         // given the choice, both models wrote actions at the root and never took a line.
         let actions = if offered && allow_subgoal { ActionSet::Exact(Vec::new()) } else { actions };
         if self.cfg.show_effects {
             view.options = self.effects_menu(&actions, &targets)?;
         }
+        if inferring {
+            view.options = Some(goals::menu_text(&subgoal_menu));
+        }
         // Where the goals are kept, `lines_done_at` judges `done` (strictly: below it the model
         // may not write it); elsewhere `done_at` (below it the model may still write it).
-        let (done_at, strict) = if self.keeps_goals() {
+        // The root setting its own goals answers with its likeliest whole line, `done` among them.
+        let (done_at, strict) = if inferring {
+            (None, false)
+        } else if self.keeps_goals() {
             (self.cfg.lines_done_at, self.cfg.lines_done_at.is_some())
         } else {
             (self.cfg.done_at, false)
         };
         let grammar = DecomposeGrammar { actions, subgoal_chars: self.cfg.subgoal_chars, allow_subgoal, allow_done, subgoal_menu };
-        Ok(Ok(Menu { grammar, targets, done_at, strict }))
+        Ok(Ok(Menu { grammar, targets, done_at, strict, whole: inferring }))
     }
 
     /// The decomposition model's answer to a decision (or the random chooser's): a decision with
@@ -170,10 +187,12 @@ impl Run<'_> {
             // One admissible answer: asking a model (or drawing) could not change it.
             line
         } else if self.rng.is_some() {
-            match self.draw(dg, st) {
+            match self.draw(dg, st, menu.whole) {
                 Some(t) => t,
                 None => return Ok(Proposed::Nothing),
             }
+        } else if menu.whole {
+            self.likeliest(node, &prompt, dg)?
         } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal, menu.done_at)? {
             "done".to_string()
         } else {
@@ -206,7 +225,7 @@ impl Run<'_> {
     /// found to drift off them).
     pub(super) fn under_offered(&self, node: NodeId) -> bool {
         let n = self.tree.node(node);
-        node != self.tree.root() && n.parent == Some(self.tree.root()) && self.req.subgoals.contains(&n.text)
+        node != self.tree.root() && n.parent == Some(self.tree.root()) && self.goals.lines.contains(&n.text)
     }
 
     /// Whether every object `a` names is in the run's focus: a plan names only the objects it was
@@ -281,7 +300,7 @@ impl Run<'_> {
                 }
                 let Some(after) = trial(&before, a) else { return false };
                 changes_its_objects(w, &after, a)
-                    && !(self.keeps_goals() && makes_false(&before, &after, &self.req.kept))
+                    && !(self.keeps_goals() && makes_false(&before, &after, &self.goals.kept))
                     && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
             })
             .collect();
@@ -316,6 +335,40 @@ impl Run<'_> {
         self.record(CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms));
         self.trace.event("done_check", json!({"node": node, "p_done": (p * 1000.0).round() / 1000.0, "done": done}));
         Ok(done)
+    }
+
+    /// The likeliest whole answer among the menu's subgoal lines and `done` (when offered): each is
+    /// scored as the complete answer and the highest total log probability wins (the first on a
+    /// tie). Greedy decoding commits to the first token alone: a tiny model that copies the
+    /// menu's lines one after another never wrote `done` there, where the whole answers' odds
+    /// compare `done` with each line as a whole.
+    fn likeliest(&mut self, node: NodeId, prompt: &Prompt, dg: &DecomposeGrammar) -> Result<String, StopCause> {
+        let mut answers: Vec<String> = dg.subgoal_menu.iter().map(|l| format!("subgoal: {l}")).collect();
+        if dg.allow_done {
+            answers.push("done".to_string());
+        }
+        self.check_global()?;
+        let hash = prompt_hash(prompt, &answers.join("\n"));
+        let t = Instant::now();
+        let scoring = self.model.score(prompt, &answers).map_err(|e| {
+            self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
+                "kind": "error", "error": e.to_string()}));
+            StopCause::Error(format!("score call at node {node}: {e}"))
+        })?;
+        let total_ms = t.elapsed().as_secs_f64() * 1e3;
+        self.stats.llm_calls += 1;
+        let mut best = 0;
+        for (i, s) in scoring.scores.iter().enumerate() {
+            if s.logprob > scoring.scores[best].logprob {
+                best = i;
+            }
+        }
+        self.record(CallRecord::of_scoring(node, hash, &scoring, &answers[best], total_ms));
+        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(|s| s.logprob).zip(answers.iter().map(String::as_str)).collect();
+        top.sort_by(|a, b| b.0.total_cmp(&a.0));
+        self.trace.event("scores", json!({"node": node, "whole": true,
+            "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
+        Ok(answers.swap_remove(best))
     }
 
     /// The action of an `action:` proposal chosen by likelihood: every action of an exact set is
@@ -379,8 +432,12 @@ impl Run<'_> {
     /// `random_steps` of them (or none is left), then `done`. Its only stopping rule is that fixed
     /// length: nothing in it looks at the goals' state.
     /// `None`: nothing can be drawn and `done` is not offered (no step taken): the node is given up.
-    fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop) -> Option<String> {
+    fn draw(&mut self, dg: &DecomposeGrammar, st: &NodeLoop, setting_goals: bool) -> Option<String> {
         let rng = self.rng.as_mut().expect("draw is called for the random planner only");
+        // A root setting its own goals (`infer_goals`) sets `random_lines` of them, then is done.
+        if setting_goals && st.tried.len() >= self.cfg.random_lines && dg.allow_done {
+            return Some("done".to_string());
+        }
         if dg.allow_subgoal && !dg.subgoal_menu.is_empty() {
             return Some(format!("subgoal: {}", dg.subgoal_menu[rng.random_range(0..dg.subgoal_menu.len())]));
         }

@@ -14,6 +14,7 @@
 pub mod baseline;
 pub mod bridge;
 mod decompose;
+pub mod goals;
 pub mod env;
 pub mod planner;
 pub mod prompt;
@@ -185,6 +186,9 @@ pub struct PlannerConfig {
     pub random_actions: usize,
     /// Actions the `random` planner executes under each offered subgoal before it says `done` there.
     pub random_steps: usize,
+    /// Goal lines the `random` planner sets (with `infer_goals`), drawn uniformly among the
+    /// candidates, before it says `done` at the root.
+    pub random_lines: usize,
     /// Below the root, a node's actions name only the objects its text names (and what holds them);
     /// see `planner::Run::node_focus`.
     pub subgoal_focus: bool,
@@ -258,6 +262,11 @@ pub struct PlannerConfig {
     /// met as many tasks without it (24 of 30 on `--every 6`, against 23) at a third of the time a
     /// call (each list is ~650 prompt tokens).
     pub show_effects: bool,
+    /// Where the protocol shows no goals, the root first chooses its own goal lines, one at a time,
+    /// among the lines the world can state about its objects (`goals::candidates`), and says
+    /// `done` when it has set enough; each line is then worked as a shown goal line. Needs a world
+    /// model; not in `no-subgoal-tree`. The lines are the model's choice: nothing reads the task's goals.
+    pub infer_goals: bool,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
     /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
@@ -290,6 +299,7 @@ impl Default for PlannerConfig {
             random_seed: 0,
             random_actions: 30,
             random_steps: 10,
+            random_lines: 2,
             subgoal_focus: true,
             goal_subgoals: true,
             target_subgoals: true,
@@ -305,6 +315,7 @@ impl Default for PlannerConfig {
             done_at: Some(DONE_AT),
             lines_done_at: Some(LINES_DONE_AT),
             show_effects: false,
+            infer_goals: false,
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
             observe_budget: 600,
@@ -507,6 +518,7 @@ impl PlannerConfig {
             "random_seed": self.random_seed,
             "random_actions": self.random_actions,
             "random_steps": self.random_steps,
+            "random_lines": self.random_lines,
             "subgoal_focus": self.subgoal_focus,
             "goal_subgoals": self.goal_subgoals,
             "target_subgoals": self.target_subgoals,
@@ -522,6 +534,7 @@ impl PlannerConfig {
             "done_at": self.done_at,
             "lines_done_at": self.lines_done_at,
             "show_effects": self.show_effects,
+            "infer_goals": self.infer_goals,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
@@ -580,6 +593,9 @@ impl PlannerConfig {
         if let Some(n) = usize_of(v, "random_steps")? {
             c.random_steps = n;
         }
+        if let Some(n) = usize_of(v, "random_lines")? {
+            c.random_lines = n;
+        }
         if let Some(x) = v.get("oracle_stop").and_then(Value::as_bool) {
             c.oracle_stop = x;
         }
@@ -598,6 +614,7 @@ impl PlannerConfig {
         c.done_at = v.get("done_at").and_then(Value::as_f64);
         c.lines_done_at = v.get("lines_done_at").and_then(Value::as_f64);
         c.show_effects = v.get("show_effects").and_then(Value::as_bool).unwrap_or(false);
+        c.infer_goals = v.get("infer_goals").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,
@@ -650,9 +667,12 @@ pub fn plan(
             planner::run_tree(model, env, req, cfg, trace)
         }
         PlannerKind::Flat => baseline::flat(model, env, req, cfg, trace),
-        // With offered subgoals, the random chooser walks the same tree as the model (one subgoal at
-        // a time, each node's actions over its own objects); without, it draws over the whole focus.
-        PlannerKind::Random if !req.subgoals.is_empty() => planner::run_tree(model, env, req, cfg, trace),
+        // With offered subgoals (or goals to set), the random chooser walks the same tree as the
+        // model (one subgoal at a time, each node's actions over its own objects); without, it
+        // draws over the whole focus.
+        PlannerKind::Random if !req.subgoals.is_empty() || cfg.infer_goals => {
+            planner::run_tree(model, env, req, cfg, trace)
+        }
         PlannerKind::Random => baseline::random(env, req, cfg, trace),
     };
     trace.event(

@@ -19,6 +19,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::decompose::Proposed;
+use super::goals::{self, Goals};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter};
 use super::terminate::echoes;
@@ -135,6 +136,8 @@ pub(crate) struct Run<'a> {
     /// What the last executed action changed among its objects: the facts that hold after it and
     /// did not before.
     pub(super) last_change: Vec<Fact>,
+    /// The root's goal lines: shown by the protocol, or candidates the model chooses among.
+    pub(super) goals: Goals,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -170,14 +173,20 @@ pub(crate) fn run_tree(
         executed: Vec::new(),
         start: Instant::now(),
         rng: (cfg.kind == PlannerKind::Random).then(|| StdRng::seed_from_u64(cfg.random_seed)),
+        goals: Goals::shown(req),
     };
     run.node_event(0);
     let root = run.tree.root();
+    run.infer_goals();
     run.set_status(root, Status::Decomposing, "the instruction");
     let stop = match run.expand(root, None) {
         Ok(End::Complete) => {
-            let lines = !req.subgoals.is_empty() && run.mode != ContextMode::NoSubgoalTree;
-            let why = if lines { "every offered goal line was taken" } else { "the model said done" };
+            let lines = !run.goals.lines.is_empty() && run.mode != ContextMode::NoSubgoalTree;
+            let why = match (lines, run.goals.inferred) {
+                (true, false) => "every offered goal line was taken",
+                (true, true) => "the model said done after setting its goals",
+                (false, _) => "the model said done",
+            };
             run.set_status(root, Status::Executed, why);
             StopCause::Done
         }
@@ -192,6 +201,30 @@ pub(crate) fn run_tree(
 }
 
 impl Run<'_> {
+    /// With `infer_goals`, where the protocol shows no goals: the root's subgoals become the lines
+    /// the world can state about its objects, for the model to choose among (see `goals`). Left
+    /// as it is without a world, over too many objects, or when nothing can be stated.
+    fn infer_goals(&mut self) {
+        if !self.cfg.infer_goals || !self.goals.lines.is_empty() || self.mode == ContextMode::NoSubgoalTree {
+            return;
+        }
+        let Ok(focus) = self.node_focus(self.tree.root()) else { return };
+        let Some(w) = self.env.world() else { return };
+        let objects = focus.iter().filter(|&&id| id != w.character()).count();
+        if objects > goals::MAX_GOAL_OBJECTS {
+            self.trace.event("goal_candidates", json!({"lines": [], "why": format!(
+                "{objects} objects: more than {} to set goals over", goals::MAX_GOAL_OBJECTS)}));
+            return;
+        }
+        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs);
+        if candidates.is_empty() {
+            return;
+        }
+        self.goals = Goals::inferred(candidates);
+        self.prompter = self.prompter.clone().setting_goals();
+        self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
+    }
+
     fn node_event(&mut self, id: NodeId) {
         let n = self.tree.node(id);
         self.trace.event(
@@ -357,14 +390,28 @@ impl Run<'_> {
         // With `single_step_lines`, a node under an offered goal line is complete once one step (an
         // action, or a target whose action ran) has been accepted.
         let one_step = self.under_offered(node) && self.cfg.single_step_lines;
+        // A line the model set itself (`infer_goals`) says what completes it: its state or relation
+        // holding, or a step of its verb having run. (A shown goal line's completion stays the
+        // model's `done`: the world checking the task's own goals would be an oracle.)
+        let set_line = if self.under_offered(node) { self.goals.meaning(&self.tree.node(node).text).cloned() } else { None };
+        let set_verb = match &set_line {
+            Some(goals::Meaning::Verb(v)) => Some(*v),
+            _ => None,
+        };
         // Whether a step that ran completes this node.
-        let completes = |a: &Action| target.as_ref() == Some(a) || one_step;
+        let completes = |a: &Action| target.as_ref() == Some(a) || one_step || set_verb == Some(a.verb);
         loop {
             if !is_root && st.replans > budgets.max_replans {
                 return Ok(End::Abandoned("replans"));
             }
             if !is_root && st.children >= budgets.max_children {
                 return Ok(End::Abandoned("children"));
+            }
+            if let (Some(goals::Meaning::Fact(f)), Some(w)) = (&set_line, self.env.world()) {
+                if w.holds(f) {
+                    self.trace.event("line_holds", json!({"node": node, "line": self.tree.node(node).text}));
+                    return Ok(End::Complete);
+                }
             }
             self.check_global()?;
             let mut view = self.view(node, st.previous.as_deref(), st.rejected.as_deref());
@@ -396,10 +443,16 @@ impl Run<'_> {
             let child = self.tree.add_child(node, child_text.clone(), child_action.clone());
             st.children += 1;
             self.node_event(child);
-            if child_action.is_none() && self.req.subgoals.contains(&child_text) {
+            if child_action.is_none() && self.goals.lines.contains(&child_text) {
                 st.tried.push(child_text.clone());
+                if is_root {
+                    self.goals.take(&child_text);
+                }
             }
-            if child_action.is_none() && echoes(&child_text, &self.tree.node(node).text) {
+            // (a goal line at the root is congruent by construction, even where it repeats the
+            // instruction's first word: "DRINK" under "Drink")
+            let root_line = is_root && self.goals.lines.contains(&child_text);
+            if child_action.is_none() && !root_line && echoes(&child_text, &self.tree.node(node).text) {
                 self.set_status(child, Status::Replanned, "congruence: it repeats its parent's goal");
                 st.replans += 1;
                 self.stats.replans += 1;
@@ -434,7 +487,7 @@ impl Run<'_> {
                 st.tried.push(child_text.clone());
             }
             let offered_child = child_action.is_none()
-                && ((is_root && self.req.subgoals.contains(&child_text)) || target_child.is_some());
+                && ((is_root && self.goals.lines.contains(&child_text)) || target_child.is_some());
 
             // The termination model's verdict on the new child.
             let Some(verdict) = self.judge(child, child_action.as_ref(), depth, &view, &text, offered_child)? else {

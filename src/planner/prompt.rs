@@ -13,6 +13,8 @@ use crate::llm::chat::Message;
 use crate::llm::engine::Prompt;
 
 const SYSTEM_TEMPLATE: &str = include_str!("../../prompts/step_system.txt");
+/// Appended to the system message when the root sets its own goals (`PlannerConfig::infer_goals`).
+const GOALS_EXAMPLES: &str = include_str!("../../prompts/step_goals.txt");
 const DECOMPOSE_REQUEST: &str = "Next step?";
 const TERMINATE_REQUEST: &str = "Judge the step.";
 
@@ -69,6 +71,14 @@ impl Prompter {
             task.push('\n');
         }
         Prompter { system: system_message(), task }
+    }
+
+    /// The same prompts, with the worked examples of a root setting its own goals in the system
+    /// message (only then: the other runs keep their prompt, and its reused prefix, unchanged).
+    pub fn setting_goals(mut self) -> Prompter {
+        self.system.push('\n');
+        self.system.push_str(GOALS_EXAMPLES.trim_end());
+        self
     }
 
     fn node_text(&self, v: &NodeView) -> String {

@@ -26,7 +26,7 @@ impl Run<'_> {
             protected.extend(st.established.iter().cloned());
         }
         if self.keeps_goals() {
-            protected.extend(self.req.kept.iter().cloned());
+            protected.extend(self.goals.kept.iter().cloned());
         }
         let idle_rule = !is_root && self.idle_rule();
         let ActionSet::Exact(list) = set else { return Ok(set) };
@@ -47,7 +47,7 @@ impl Run<'_> {
     /// whose goals are only closeness and actions (pet the cat: be close to it, TOUCH it) keeps no
     /// fact, yet its lines are goal lines all the same.
     pub(super) fn keeps_goals(&self) -> bool {
-        self.cfg.keep_goals && (!self.req.kept.is_empty() || !self.req.named_verbs.is_empty())
+        self.cfg.keep_goals && (!self.goals.kept.is_empty() || !self.goals.named_verbs.is_empty())
     }
 
     /// Whether idle steps are left out at all (`PlannerConfig::skip_idle`, where the goals are kept).
@@ -58,13 +58,13 @@ impl Run<'_> {
     /// Whether a step of `verb` that changes nothing is left out: under the idle rule, unless the
     /// goals name the verb as an action the plan must include.
     pub(super) fn skips_idle(&self, verb: Verb) -> bool {
-        self.idle_rule() && !self.req.named_verbs.contains(&verb)
+        self.idle_rule() && !self.goals.named_verbs.contains(&verb)
     }
 
     /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).
     pub(super) fn line_fact(&self, line: &str) -> Option<&Fact> {
         let w = self.env.world()?;
-        self.req.kept.iter().find(|f| w.describe(f) == line)
+        self.goals.kept.iter().find(|f| w.describe(f) == line)
     }
 
     /// Where the goals are kept: a goal line that was met when done, and whose fact a later step

@@ -15,7 +15,11 @@ struct Scripted {
     grammars: Vec<String>,
     /// Scoring: this line is the likeliest (-0.1 a token), every other -1.0 a token.
     prefer: Option<String>,
+    /// Scoring, one call each in turn (before `prefer`): this line is the likeliest.
+    preferences: VecDeque<String>,
     scored: Vec<Vec<String>>,
+    /// The prompt of each scoring call.
+    scored_prompts: Vec<String>,
     /// The probability it gives `done` as its answer's first word (the done check; 0: never).
     p_done: f64,
 }
@@ -27,7 +31,9 @@ impl Scripted {
             prompts: vec![],
             grammars: vec![],
             prefer: None,
+            preferences: VecDeque::new(),
             scored: vec![],
+            scored_prompts: vec![],
             p_done: 0.0,
         }
     }
@@ -69,8 +75,9 @@ impl Generate for Scripted {
         })
     }
 
-    fn score(&mut self, _: &Prompt, continuations: &[String]) -> crate::llm::Result<crate::llm::engine::Scoring> {
+    fn score(&mut self, prompt: &Prompt, continuations: &[String]) -> crate::llm::Result<crate::llm::engine::Scoring> {
         self.scored.push(continuations.to_vec());
+        self.scored_prompts.push(prompt_text(prompt));
         if continuations.first().map(String::as_str) == Some("done") {
             let rest = (1.0 - self.p_done) / (continuations.len() - 1) as f64;
             let scores = continuations
@@ -83,10 +90,11 @@ impl Generate for Scripted {
                 .collect();
             return Ok(crate::llm::engine::Scoring { scores, prompt_tokens: 100, reused_tokens: 99, run_tokens: 2, ms: 1.0 });
         }
+        let prefer = self.preferences.pop_front().or_else(|| self.prefer.clone());
         let scores = continuations
             .iter()
             .map(|c| {
-                let per = if self.prefer.as_deref() == Some(c.as_str()) { -0.1 } else { -1.0 };
+                let per = if prefer.as_deref() == Some(c.as_str()) { -0.1 } else { -1.0 };
                 crate::llm::engine::Score { logprob: per * 5.0, tokens: 5 }
             })
             .collect();
@@ -1097,4 +1105,54 @@ fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again_once()
     // Without kept goals the line is not offered again: the fridge stays open.
     let (out, _) = go(false);
     assert_ne!(plan_lines(&out).last().map(String::as_str), Some("[CLOSE] <fridge> (10)"));
+}
+
+#[test]
+fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
+    let open = "fridge is OPEN";
+    // (a target: the world walks to the fridge, then it opens; the line then holds, which
+    // completes a line the model set itself, without a `done`)
+    let mut m = Scripted::new(&["action: [OPEN] <fridge> (10)"]);
+    // The root answers by scoring its whole answers: the line, then `done`.
+    m.preferences = [format!("subgoal: {open}"), "done".to_string()].into();
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("put the apple in the fridge", vec![]);
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert_eq!(plan_lines(&out), ["[WALK] <fridge> (10)", "[OPEN] <fridge> (10)"]);
+    // The root's first decision: one of the lines the world can state about the objects the
+    // instruction names (shown in the prompt), no `done` before a goal is set, no actions.
+    let first = &m.scored[0];
+    assert!(first.contains(&format!("subgoal: {open}")) && first.contains(&format!("subgoal: {APPLE_IN_FRIDGE}")), "{first:?}");
+    assert!(!first.iter().any(|a| a == "done" || a.contains("[WALK]")), "{first:?}");
+    assert!(!first.iter().any(|a| a.contains("television")), "the instruction names no television: {first:?}");
+    assert!(m.scored_prompts[0].contains("Goals you can set:\nfridge is ON"), "{}", m.scored_prompts[0]);
+    assert!(m.scored_prompts[1].contains(&format!("Previous step: {open}: done")), "{}", m.scored_prompts[1]);
+    assert_eq!(m.prompts.len(), 1, "the line's one decision: {:?}", m.prompts);
+    assert_eq!(out.tree.node(1).status, Status::Executed);
+    // Back at the root: the line is not offered again, and `done` is.
+    let second = &m.scored[1];
+    assert!(second.last().is_some_and(|a| a == "done") && !second.contains(&format!("subgoal: {open}")), "{second:?}");
+    assert_eq!(out.tree.node(0).history.last().unwrap().1, "the model said done after setting its goals");
+    // Without the flag the root proposes actions, and no goal lines.
+    let (_, m) = run(&["done"], &defaults());
+    assert!(!m.grammars[0].contains(&format!("\"{open}\"")) && m.grammars[0].contains("[WALK]"), "{}", m.grammars[0]);
+}
+
+#[test]
+fn a_goal_line_that_repeats_the_instructions_first_word_is_still_taken() {
+    // "WATCH" under "Watch the television": a line is congruent by construction; the echo check
+    // (for subgoals the model writes) once rejected it, and the line was lost.
+    let mut m = Scripted::new(&["action: [WALK] <television> (31)", "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest {
+        subgoals: vec!["WATCH".to_string()],
+        ..PlanRequest::new("Watch the television", vec![])
+    };
+    let out = plan(&mut m, &mut env, &req, &defaults(), &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(out.tree.node(1).text, "WATCH");
+    assert_eq!(out.tree.node(1).status, Status::Executed, "{:?}", out.tree.node(1).history);
+    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)"]);
 }

@@ -1,0 +1,238 @@
+//! The root's goal lines: what the instruction is decomposed into first. Either the protocol shows
+//! them (a task's goal conditions in words, every one to be taken), or, with
+//! `PlannerConfig::infer_goals` where none are shown, the model chooses them one at a time among
+//! the lines the world can state about the root's objects (a state, a relation or an action the
+//! embodiment can bring about there), and says `done` when it has set enough: the paper's first
+//! decomposition, under a grammar, with the model deciding when the task is complete.
+//!
+//! A chosen line is then treated as a shown one: its fact is kept from being undone and its verb is
+//! named (see `rules`); below it the planner works as under `--protocol goals`.
+
+use std::collections::BTreeSet;
+
+use super::rules::{changes_nothing, gained, trial};
+use super::PlanRequest;
+use crate::action::Verb;
+use crate::scene_grammar::typed_actions;
+use crate::world::vocab::{Property, Relation, State};
+use crate::world::{Fact, World};
+
+/// What a candidate line asks for.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Meaning {
+    /// A state or relation that is to hold at the end.
+    Fact(Fact),
+    /// An action the plan must include (one that changes nothing the world records: WATCH, TOUCH).
+    Verb(Verb),
+}
+
+/// The root's goal lines and what the taken ones ask to hold.
+#[derive(Clone, Debug, Default)]
+pub struct Goals {
+    /// The lines the root may take as its subgoals.
+    pub lines: Vec<String>,
+    /// The lines are candidates the model chooses among (it may say `done` once it has taken one),
+    /// not the task's goals, every one of which is taken.
+    pub inferred: bool,
+    /// For inferred lines, what each asks for (same order as `lines`).
+    meanings: Vec<Meaning>,
+    /// Facts not to be undone: the shown goals', or the taken inferred lines'.
+    pub kept: Vec<Fact>,
+    /// Verbs a goal names as actions the plan must include (idle steps of these stay offered).
+    pub named_verbs: Vec<Verb>,
+}
+
+impl Goals {
+    /// The goals the request shows (none unless the protocol shows them).
+    pub fn shown(req: &PlanRequest) -> Goals {
+        Goals {
+            lines: req.subgoals.clone(),
+            inferred: false,
+            meanings: Vec::new(),
+            kept: req.kept.clone(),
+            named_verbs: req.named_verbs.clone(),
+        }
+    }
+
+    /// What an inferred line asks for (`None` for a shown line: its completion is the model's).
+    pub fn meaning(&self, line: &str) -> Option<&Meaning> {
+        let i = self.lines.iter().position(|l| l == line).filter(|_| self.inferred)?;
+        self.meanings.get(i)
+    }
+
+    /// Candidate lines for the model to choose among (see [`candidates`]); nothing is kept yet.
+    pub fn inferred(candidates: Vec<(String, Meaning)>) -> Goals {
+        let (lines, meanings) = candidates.into_iter().unzip();
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new() }
+    }
+
+    /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
+    /// the same object (ON after OFF, CLOSED after OPEN, PLUGGED_OUT after PLUGGED_IN).
+    pub fn contradicts_taken(&self, line: &str) -> bool {
+        let Some(Meaning::Fact(Fact::State { id, state })) = self.meaning(line) else { return false };
+        self.kept.iter().any(|k| matches!(k, Fact::State { id: i, state: s } if i == id && s != state && opposite(*s) == Some(*state)))
+    }
+
+    /// The root took `line`: an inferred line's fact is kept from now on, or its verb named.
+    pub fn take(&mut self, line: &str) {
+        let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return };
+        match &self.meanings[i] {
+            Meaning::Fact(f) if !self.kept.contains(f) => self.kept.push(f.clone()),
+            Meaning::Verb(v) if !self.named_verbs.contains(v) => self.named_verbs.push(*v),
+            _ => {}
+        }
+    }
+}
+
+/// The other state of a two-state pair.
+fn opposite(s: State) -> Option<State> {
+    Some(match s {
+        State::On => State::Off,
+        State::Off => State::On,
+        State::Open => State::Closed,
+        State::Closed => State::Open,
+        State::PluggedIn => State::PluggedOut,
+        State::PluggedOut => State::PluggedIn,
+        _ => return None,
+    })
+}
+
+/// Lines left to set, one a line, for the prompt (shown next to the question).
+pub fn menu_text(lines: &[String]) -> String {
+    let mut s = String::from("Goals you can set:\n");
+    for l in lines {
+        s.push_str(l);
+        s.push('\n');
+    }
+    s
+}
+
+/// The most objects whose candidate lines are enumerated: past it (an instruction that names
+/// nothing in a whole house) the lines would be thousands and nothing tells them apart.
+pub const MAX_GOAL_OBJECTS: usize = 40;
+
+/// The lines the world can state about `focus` (the robot aside), in the goal lines' words
+/// ([`World::describe`]), each once:
+/// - for each object, the states its properties allow, both ways (a switch ON and OFF, a door
+///   OPEN and CLOSED, a plug PLUGGED_IN and PLUGGED_OUT), whatever holds now: a goal may be that
+///   it stays so;
+/// - what each action of the `typed` set over `focus` makes true among its objects and the robot,
+///   run on a copy of the world after the way to it (the apple INSIDE the fridge, the robot
+///   SITTING, FACING the television, holding the mug), closeness left out;
+/// - the verb of each such action that changes nothing the world records (WATCH, TOUCH, DRINK):
+///   only the plan's including it can be asked for.
+///
+/// Moves and `excluded` verbs are not asked about; an action whose way names an object outside
+/// `focus` is left out, like a target's.
+pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb]) -> Vec<(String, Meaning)> {
+    let robot = w.character();
+    let objects: Vec<u32> = focus
+        .iter()
+        .copied()
+        .filter(|&id| id != robot && w.node(id).is_some_and(|n| !n.is_room()))
+        .collect();
+    let in_focus: BTreeSet<u32> = focus.iter().copied().collect();
+    let mut out: Vec<(String, Meaning)> = Vec::new();
+    let mut push = |line: String, m: Meaning| {
+        if !out.iter().any(|(l, _)| *l == line) {
+            out.push((line, m));
+        }
+    };
+    for &id in &objects {
+        let Some(n) = w.node(id) else { continue };
+        for (p, states) in [
+            (Property::HasSwitch, [State::On, State::Off]),
+            (Property::CanOpen, [State::Open, State::Closed]),
+            (Property::HasPlug, [State::PluggedIn, State::PluggedOut]),
+        ] {
+            if n.properties.contains(p) {
+                for state in states {
+                    let f = Fact::State { id, state };
+                    push(w.describe(&f), Meaning::Fact(f));
+                }
+            }
+        }
+    }
+    let mut idle: Vec<Verb> = Vec::new();
+    for a in typed_actions(w, &objects) {
+        if matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find) || excluded.contains(&a.verb) {
+            continue;
+        }
+        let Some((way, before)) = w.way_to(&a) else { continue };
+        if !way.iter().all(|s| s.args.iter().all(|o| in_focus.contains(&o.id))) {
+            continue;
+        }
+        let Some(after) = trial(&before, &a) else { continue };
+        if changes_nothing(&before, &after, &a) {
+            if !idle.contains(&a.verb) {
+                idle.push(a.verb);
+            }
+            continue;
+        }
+        for f in gained(&before, &after, &a) {
+            let stated = match &f {
+                Fact::Edge { relation, .. } => *relation != Relation::Close,
+                Fact::State { .. } => true,
+                Fact::Holds { .. } => false,
+            };
+            if stated {
+                push(w.describe(&f), Meaning::Fact(f));
+            }
+        }
+    }
+    // Verbs in declaration order, after the facts: a stable menu whatever the scene's ids.
+    idle.sort();
+    for v in idle {
+        push(v.name().to_string(), Meaning::Verb(v));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn candidates_are_what_the_world_can_state_about_the_objects_each_once() {
+        let w = World::demo();
+        // apple (12), fridge (10), kitchencounter (11)
+        let c = candidates(&w, &[12, 10, 11], &[]);
+        let lines: Vec<&str> = c.iter().map(|(l, _)| l.as_str()).collect();
+        for l in [
+            "fridge is OPEN",
+            "fridge is CLOSED",
+            "apple is INSIDE to fridge",
+            "apple is ON to kitchencounter",
+            "character is HOLDS_RH to apple",
+            "character is FACING to fridge",
+            "TOUCH",
+        ] {
+            assert!(lines.contains(&l), "{l} missing from {lines:?}");
+        }
+        // Closeness is a means, not a goal; nothing names an object outside the focus; no repeats.
+        assert!(!lines.iter().any(|l| l.contains("CLOSE to")), "{lines:?}");
+        assert!(!lines.iter().any(|l| l.contains("television") || l.contains("plate")), "{lines:?}");
+        let mut sorted = lines.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), lines.len());
+        // Excluded verbs are not asked about.
+        let c = candidates(&w, &[12, 10, 11], &[Verb::Touch, Verb::Grab]);
+        assert!(!c.iter().any(|(l, _)| l == "TOUCH" || l == "character is HOLDS_RH to apple"));
+    }
+
+    #[test]
+    fn a_taken_inferred_line_keeps_its_fact_or_names_its_verb() {
+        let w = World::demo();
+        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[]));
+        assert!(g.kept.is_empty() && g.named_verbs.is_empty());
+        g.take("fridge is CLOSED");
+        g.take("TOUCH");
+        g.take("not a line");
+        assert_eq!(g.kept, [Fact::State { id: 10, state: State::Closed }]);
+        // The fridge's other state now contradicts a taken line; its other facts do not.
+        assert!(g.contradicts_taken("fridge is OPEN") && !g.contradicts_taken("fridge is ON"));
+        assert!(!g.contradicts_taken("fridge is CLOSED") && !g.contradicts_taken("TOUCH"));
+        assert_eq!(g.named_verbs, [Verb::Touch]);
+    }
+}
