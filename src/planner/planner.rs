@@ -449,10 +449,12 @@ impl Run<'_> {
                     self.goals.take(&child_text);
                 }
             }
-            // (a goal line at the root is congruent by construction, even where it repeats the
-            // instruction's first word: "DRINK" under "Drink")
+            // Only free text can echo: a goal line at the root and a target are congruent by
+            // construction, even where they repeat the goal's first word ("DRINK" under "Drink",
+            // the target "[DRINK] <cup> (1000)" under the line "DRINK").
             let root_line = is_root && self.goals.lines.contains(&child_text);
-            if child_action.is_none() && !root_line && echoes(&child_text, &self.tree.node(node).text) {
+            let free_text = child_action.is_none() && target_child.is_none() && !root_line;
+            if free_text && echoes(&child_text, &self.tree.node(node).text) {
                 self.set_status(child, Status::Replanned, "congruence: it repeats its parent's goal");
                 st.replans += 1;
                 self.stats.replans += 1;
@@ -532,7 +534,7 @@ impl Run<'_> {
                                 st.met_lines.push(child_text.clone());
                             }
                             st.rejected = None;
-                            if one_step {
+                            if one_step || target_child.as_ref().is_some_and(|t| set_verb == Some(t.verb)) {
                                 return Ok(End::Complete);
                             }
                         }

@@ -1156,3 +1156,17 @@ fn a_goal_line_that_repeats_the_instructions_first_word_is_still_taken() {
     assert_eq!(out.tree.node(1).status, Status::Executed, "{:?}", out.tree.node(1).history);
     assert_eq!(plan_lines(&out), ["[WALK] <television> (31)"]);
 }
+
+#[test]
+fn a_verb_line_the_model_set_is_complete_once_a_step_of_its_verb_runs() {
+    let mut m = Scripted::new(&["action: [WATCH] <television> (31)"]);
+    m.preferences = ["subgoal: WATCH".to_string(), "done".to_string()].into();
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("watch the television", vec![]);
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[WATCH] <television> (31)"));
+    assert_eq!(m.prompts.len(), 1, "no `done` asked below the line: {:?}", m.prompts);
+    assert_eq!(m.scored.len(), 2, "the root's two answers: the line, then done");
+}
