@@ -347,27 +347,7 @@ impl Run<'_> {
         if dg.allow_done {
             answers.push("done".to_string());
         }
-        self.check_global()?;
-        let hash = prompt_hash(prompt, &answers.join("\n"));
-        let t = Instant::now();
-        let scoring = self.model.score(prompt, &answers).map_err(|e| {
-            self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
-                "kind": "error", "error": e.to_string()}));
-            StopCause::Error(format!("score call at node {node}: {e}"))
-        })?;
-        let total_ms = t.elapsed().as_secs_f64() * 1e3;
-        self.stats.llm_calls += 1;
-        let mut best = 0;
-        for (i, s) in scoring.scores.iter().enumerate() {
-            if s.logprob > scoring.scores[best].logprob {
-                best = i;
-            }
-        }
-        self.record(CallRecord::of_scoring(node, hash, &scoring, &answers[best], total_ms));
-        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(|s| s.logprob).zip(answers.iter().map(String::as_str)).collect();
-        top.sort_by(|a, b| b.0.total_cmp(&a.0));
-        self.trace.event("scores", json!({"node": node, "whole": true,
-            "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
+        let best = self.best_scored(node, prompt, &answers, |s| s.logprob, json!({"whole": true}))?;
         Ok(answers.swap_remove(best))
     }
 
@@ -379,11 +359,25 @@ impl Run<'_> {
         if list.len() < 2 {
             return Ok(written);
         }
-        self.check_global()?;
         let lines: Vec<String> = list.iter().map(|a| format!("action: {a}")).collect();
-        let hash = prompt_hash(prompt, &lines.join("\n"));
+        let best = self.best_scored(node, prompt, &lines, Score::mean, json!({"written": format!("action: {written}")}))?;
+        Ok(list[best].clone())
+    }
+
+    /// One scoring call over `answers`: the index of the best by `key` (the first on a tie),
+    /// recorded as a call and traced with the top five (and `fields`).
+    fn best_scored(
+        &mut self,
+        node: NodeId,
+        prompt: &Prompt,
+        answers: &[String],
+        key: fn(&Score) -> f64,
+        mut fields: serde_json::Value,
+    ) -> Result<usize, StopCause> {
+        self.check_global()?;
+        let hash = prompt_hash(prompt, &answers.join("\n"));
         let t = Instant::now();
-        let scoring = self.model.score(prompt, &lines).map_err(|e| {
+        let scoring = self.model.score(prompt, answers).map_err(|e| {
             self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
                 "kind": "error", "error": e.to_string()}));
             StopCause::Error(format!("score call at node {node}: {e}"))
@@ -392,16 +386,17 @@ impl Run<'_> {
         self.stats.llm_calls += 1;
         let mut best = 0;
         for (i, s) in scoring.scores.iter().enumerate() {
-            if s.mean() > scoring.scores[best].mean() {
+            if key(s) > key(&scoring.scores[best]) {
                 best = i;
             }
         }
-        self.record(CallRecord::of_scoring(node, hash, &scoring, &lines[best], total_ms));
-        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(Score::mean).zip(lines.iter().map(String::as_str)).collect();
+        self.record(CallRecord::of_scoring(node, hash, &scoring, &answers[best], total_ms));
+        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(key).zip(answers.iter().map(String::as_str)).collect();
         top.sort_by(|a, b| b.0.total_cmp(&a.0));
-        self.trace.event("scores", json!({"node": node, "written": format!("action: {written}"),
-            "top": top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect::<Vec<_>>()}));
-        Ok(list[best].clone())
+        fields["node"] = json!(node);
+        fields["top"] = top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect();
+        self.trace.event("scores", fields);
+        Ok(best)
     }
 
     /// The options of a decision with their effects (see `PlannerConfig::show_effects`): each
