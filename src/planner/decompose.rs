@@ -162,11 +162,9 @@ impl Run<'_> {
             view.options = Some(goals::menu_text(&subgoal_menu));
         }
         // Where the goals are kept, `lines_done_at` judges `done` (strictly: below it the model
-        // may not write it); elsewhere `done_at` (below it the model may still write it).
-        // The root setting its own goals answers with its likeliest whole line, `done` among them.
-        let (done_at, strict) = if inferring {
-            (None, false)
-        } else if self.keeps_goals() {
+        // may not write it); elsewhere `done_at` (below it the model may still write it). (The
+        // root setting its own goals answers with its likeliest whole line instead: `whole`.)
+        let (done_at, strict) = if self.keeps_goals() {
             (self.cfg.lines_done_at, self.cfg.lines_done_at.is_some())
         } else {
             (self.cfg.done_at, false)

@@ -488,8 +488,7 @@ impl Run<'_> {
             if target_child.is_some() {
                 st.tried.push(child_text.clone());
             }
-            let offered_child = child_action.is_none()
-                && ((is_root && self.goals.lines.contains(&child_text)) || target_child.is_some());
+            let offered_child = child_action.is_none() && (root_line || target_child.is_some());
 
             // The termination model's verdict on the new child.
             let Some(verdict) = self.judge(child, child_action.as_ref(), depth, &view, &text, offered_child)? else {
