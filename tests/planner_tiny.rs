@@ -12,8 +12,10 @@ use step::planner::{plan, ActionChoice, Budgets, PlanRequest, PlannerConfig, Pla
 use step::world::World;
 
 fn tiny(mut spec: TinySpec, dir: &tempfile::TempDir) -> PathBuf {
-    // The planner's prompts (system message with examples, state, node) need more than the default.
-    spec.context_length = 4096;
+    // The planner's prompts (system message with examples, state, node; a goal-setting root's
+    // lines and examples) need more than the default: SmolLM2's 8192, in the tiny vocabulary's
+    // many short tokens.
+    spec.context_length = 8192;
     let path = dir.path().join(format!("tiny-{}-{}.gguf", spec.arch, spec.seed));
     write_tiny_gguf(&spec, &path).unwrap();
     path
@@ -33,11 +35,14 @@ fn random_weight_models_always_end_with_parsed_outputs_and_replay_identically() 
         (TinySpec::qwen2().with_seed(5), PlannerKind::NoSubgoalTree, Strength::Typed),
         // Actions chosen by likelihood over the feasible set (the trace holds the score calls).
         (TinySpec::llama().with_seed(4), PlannerKind::Step, Strength::Feasible),
+        // The main job's settings: the root sets its own goal lines (scored whole).
+        (TinySpec::qwen2().with_seed(3), PlannerKind::Step, Strength::Feasible),
     ];
     for (i, (spec, kind, strength)) in cases.into_iter().enumerate() {
         let model = tiny(spec, &dir);
         let choose = if i == 4 { ActionChoice::Score } else { ActionChoice::Generate };
-        let cfg = PlannerConfig { kind, strength, budgets: small_budgets(), choose, ..PlannerConfig::default() };
+        let infer_goals = i == 5;
+        let cfg = PlannerConfig { kind, strength, budgets: small_budgets(), choose, infer_goals, ..PlannerConfig::default() };
         let req = PlanRequest::new("put the apple in the fridge", vec![]);
         let trace_path = dir.path().join(format!("{i}-{kind}-{strength:?}.jsonl"));
         let mut trace = TraceWriter::create(&trace_path).unwrap();
@@ -62,6 +67,12 @@ fn random_weight_models_always_end_with_parsed_outputs_and_replay_identically() 
         assert_eq!(count("node"), out.tree.len(), "{label}");
         assert_eq!(count("exec"), out.stats.actions, "{label}");
         assert_eq!(events[0]["event"], "header");
+        if infer_goals {
+            assert_eq!(count("goal_candidates"), 1, "{label}");
+            let first = (out.tree.len() > 1).then(|| out.tree.node(1).text.clone()).unwrap_or_default();
+            assert!(first.contains("apple") || first.contains("fridge"),
+                "{label}: the root's first child is one of the lines about the apple and the fridge: {:?}", out.tree.to_json());
+        }
 
         // Replay with a fresh engine (nothing cached): the same calls, outputs, actions and stop.
         let mut engine = Engine::load(&model).unwrap();

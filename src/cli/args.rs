@@ -187,11 +187,23 @@ pub struct DecisionArgs {
     /// no gain measured with SmolLM2, at three times the time a call.
     #[arg(long)]
     pub show_effects: bool,
-    /// Where the protocol shows no goals (`objects`, `instruction`, `step plan`), the root first
-    /// sets its own goal lines, choosing one at a time among what the world can state about its
-    /// objects ("fridge is CLOSED", "apple is INSIDE to fridge", "WATCH"), until it says done.
+    /// Where the protocol shows no goals (`objects`, `instruction`), the root first sets its own
+    /// goal lines, choosing one at a time among what the world can state about its objects
+    /// ("fridge is CLOSED", "apple is INSIDE to fridge", "WATCH"), until it says done. The
+    /// default of `step plan`; `step eval plan` keeps each protocol's measured default (off).
     #[arg(long)]
     pub infer_goals: bool,
+    /// `step plan`: the root proposes steps at once, setting no goal lines of its own.
+    #[arg(long, conflicts_with = "infer_goals")]
+    pub no_infer_goals: bool,
+    /// Where the root sets goal lines: below a line it set, offer every step (by default only
+    /// those that make the line true or run its verb, where any do).
+    #[arg(long)]
+    pub any_step_under_lines: bool,
+    /// Where the root sets goal lines: offer as lines the verbs of every step that changes
+    /// nothing (LOOKAT, TOUCH, PULL), not only those the instruction names ("Watch TV": WATCH).
+    #[arg(long)]
+    pub all_verb_lines: bool,
 }
 
 /// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
@@ -224,5 +236,7 @@ impl DecisionArgs {
         cfg.lines_done_at = (!self.no_done_check).then_some(self.lines_done_at);
         cfg.show_effects = self.show_effects;
         cfg.infer_goals = self.infer_goals;
+        cfg.toward_lines = !self.any_step_under_lines;
+        cfg.all_verb_lines = self.all_verb_lines;
     }
 }

@@ -234,6 +234,9 @@ fn config(args: &PlanArgs) -> anyhow::Result<PlannerConfig> {
     }
     cfg.gen.max_tokens = args.max_tokens;
     args.rules.apply(&mut cfg);
+    // The main job (an instruction, no goals shown) sets its own goal lines unless told not to:
+    // without them SmolLM2 put the demo's apple on the fridge, not in it.
+    cfg.infer_goals = !args.rules.no_infer_goals;
     if let Some(seed) = args.seed {
         cfg.gen.sampling = Sampling::Sample { temperature: 0.7, top_p: 0.95, seed };
     }

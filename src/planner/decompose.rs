@@ -111,6 +111,7 @@ impl Run<'_> {
             }
             (None, actions) => actions,
         };
+        let actions = self.toward_own_line(node, actions, &targets)?;
         if offered && self.keeps_goals() {
             self.undone_lines(st)?;
         }
@@ -305,6 +306,30 @@ impl Run<'_> {
         Ok(menu)
     }
 
+    /// Below a goal line the model set itself (`infer_goals`): only the steps and targets that
+    /// make the line true (its fact holds after them, a target's way included) or run its verb,
+    /// when there are any. The line is the model's own subgoal; the world knows which steps
+    /// achieve it (SmolLM2 put the apple ON the fridge under "apple is INSIDE to fridge"). Never
+    /// applied to the lines a protocol shows: working the task's own goals out in the world would
+    /// be the oracle the method rules out.
+    fn toward_own_line(&self, node: NodeId, actions: ActionSet, targets: &[Action]) -> Result<ActionSet, StopCause> {
+        let ActionSet::Exact(list) = actions else { return Ok(actions) };
+        if !self.cfg.toward_lines || !self.under_offered(node) {
+            return Ok(ActionSet::Exact(list));
+        }
+        let Some(meaning) = self.goals.meaning(&self.tree.node(node).text) else { return Ok(ActionSet::Exact(list)) };
+        let w = self.world()?;
+        let achieving: Vec<Action> = list
+            .iter()
+            .filter(|a| match meaning {
+                goals::Meaning::Verb(v) => a.verb == *v,
+                goals::Meaning::Fact(f) => outcome(w, a, targets).is_some_and(|after| after.holds(f)),
+            })
+            .cloned()
+            .collect();
+        Ok(ActionSet::Exact(if achieving.is_empty() { list } else { achieving }))
+    }
+
     /// Whether the model is done at `node` by its own probability of `done` as its answer's first
     /// word (see `PlannerConfig::done_at`). A model that cannot score leaves it to generation.
     fn done_check(&mut self, node: NodeId, prompt: &Prompt, subgoals: bool, at: Option<f64>) -> Result<bool, StopCause> {
@@ -408,8 +433,7 @@ impl Run<'_> {
         let w = self.world()?;
         let mut s = String::from("Steps you can take, and what each makes true:\n");
         for a in list.iter().take(MAX_SHOWN_STEPS) {
-            let after = if targets.contains(a) { w.before_running(a).and_then(|b| trial(&b, a)) } else { trial(w, a) };
-            let facts: Vec<String> = after.map(|after| gained(w, &after, a)).unwrap_or_default().iter().take(3).map(|f| w.describe(f)).collect();
+            let facts: Vec<String> = outcome(w, a, targets).map(|after| gained(w, &after, a)).unwrap_or_default().iter().take(3).map(|f| w.describe(f)).collect();
             if facts.is_empty() {
                 s.push_str(&format!("{a}: nothing new\n"));
             } else {
@@ -443,6 +467,15 @@ impl Run<'_> {
             Some(a) => Some(format!("action: {a}")),
             None => dg.allow_done.then(|| "done".to_string()),
         }
+    }
+}
+
+/// The world after `a`: run now, or, for one of the `targets`, after its way.
+fn outcome(w: &World, a: &Action, targets: &[Action]) -> Option<World> {
+    if targets.contains(a) {
+        w.before_running(a).and_then(|b| trial(&b, a))
+    } else {
+        trial(w, a)
     }
 }
 

@@ -267,6 +267,13 @@ pub struct PlannerConfig {
     /// `done` when it has set enough; each line is then worked as a shown goal line. Needs a world
     /// model; not in `no-subgoal-tree`. The lines are the model's choice: nothing reads the task's goals.
     pub infer_goals: bool,
+    /// Below a goal line the root set itself (`infer_goals`), offer only the steps and targets
+    /// that make the line true or run its verb, where any do (read from trials on the world; the
+    /// random planner obeys it too). Shown goal lines are never narrowed so.
+    pub toward_lines: bool,
+    /// With `infer_goals`, offer as goal lines the verbs of every step that changes nothing
+    /// (LOOKAT, TOUCH, PULL), not only those the instruction names ([`goals::names_verb`]).
+    pub all_verb_lines: bool,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
     /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
@@ -316,6 +323,8 @@ impl Default for PlannerConfig {
             lines_done_at: Some(LINES_DONE_AT),
             show_effects: false,
             infer_goals: false,
+            toward_lines: true,
+            all_verb_lines: false,
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
             observe_budget: 600,
@@ -535,6 +544,8 @@ impl PlannerConfig {
             "lines_done_at": self.lines_done_at,
             "show_effects": self.show_effects,
             "infer_goals": self.infer_goals,
+            "toward_lines": self.toward_lines,
+            "all_verb_lines": self.all_verb_lines,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
@@ -543,7 +554,8 @@ impl PlannerConfig {
         })
     }
 
-    /// Reads [`PlannerConfig::to_json`]'s output; missing fields keep their defaults.
+    /// Reads [`PlannerConfig::to_json`]'s output; missing fields keep their defaults (the
+    /// goal-line rules, newer than some traces, take the value those traces ran with).
     pub fn from_json(v: &Value) -> Result<PlannerConfig, String> {
         let mut c = PlannerConfig::default();
         let usize_of = |v: &Value, k: &str| -> Result<Option<usize>, String> {
@@ -615,6 +627,9 @@ impl PlannerConfig {
         c.lines_done_at = v.get("lines_done_at").and_then(Value::as_f64);
         c.show_effects = v.get("show_effects").and_then(Value::as_bool).unwrap_or(false);
         c.infer_goals = v.get("infer_goals").and_then(Value::as_bool).unwrap_or(false);
+        // (traces written before the rule have no key: they ran without it)
+        c.toward_lines = v.get("toward_lines").and_then(Value::as_bool).unwrap_or(false);
+        c.all_verb_lines = v.get("all_verb_lines").and_then(Value::as_bool).unwrap_or(true);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,

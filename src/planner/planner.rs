@@ -216,7 +216,9 @@ impl Run<'_> {
                 "{objects} objects: more than {} to set goals over", goals::MAX_GOAL_OBJECTS)}));
             return;
         }
-        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs);
+        let instruction = self.tree.node(self.tree.root()).text.clone();
+        let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
+        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named);
         if candidates.is_empty() {
             return;
         }

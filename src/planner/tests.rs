@@ -524,10 +524,17 @@ fn config_round_trips_through_json() {
         symbolic_check: false,
         done_at: Some(0.3),
         protect_changes: false,
+        infer_goals: true,
+        random_lines: 5,
+        toward_lines: false,
+        all_verb_lines: true,
         ..cfg()
     };
     let back = PlannerConfig::from_json(&c.to_json()).unwrap();
     assert_eq!(back.to_json(), c.to_json());
+    // A trace written before the goal-line rules replays as it ran: without them.
+    let old = PlannerConfig::from_json(&serde_json::json!({})).unwrap();
+    assert!(!old.toward_lines && old.all_verb_lines);
 }
 
 #[test]
@@ -1116,7 +1123,8 @@ fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
     // The root answers by scoring its whole answers: the line, then `done`.
     m.preferences = [format!("subgoal: {open}"), "done".to_string()].into();
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    // (every step offered below the line, so that the model decides there)
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, toward_lines: false, ..defaults() };
     let req = PlanRequest::new("put the apple in the fridge", vec![]);
     let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
@@ -1162,11 +1170,36 @@ fn a_verb_line_the_model_set_is_complete_once_a_step_of_its_verb_runs() {
     let mut m = Scripted::new(&["action: [WATCH] <television> (31)"]);
     m.preferences = ["subgoal: WATCH".to_string(), "done".to_string()].into();
     let mut env = SimEnv::new(World::demo(), vec![]);
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, toward_lines: false, ..defaults() };
     let req = PlanRequest::new("watch the television", vec![]);
     let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
     assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[WATCH] <television> (31)"));
     assert_eq!(m.prompts.len(), 1, "no `done` asked below the line: {:?}", m.prompts);
     assert_eq!(m.scored.len(), 2, "the root's two answers: the line, then done");
+}
+
+#[test]
+fn below_a_line_the_model_set_only_the_steps_that_make_it_true_are_offered() {
+    let putin = "[PUTIN] <apple> (12) <fridge> (10)";
+    let infer = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("put the apple in the fridge", vec![]);
+    // With the rule: the one target that puts the apple inside is the line's only choice, so no
+    // model is asked below it (the script has no answers) and its way runs.
+    let mut m = Scripted::new(&[]);
+    m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}"), "done".to_string()].into();
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &infer, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.node(1).history);
+    assert_eq!(plan_lines(&out), [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", putin]);
+    // Without it the line offers every step, PUTBACK onto the fridge among them.
+    let mut m = Scripted::new(&[&format!("action: {putin}")]);
+    m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}"), "done".to_string()].into();
+    let cfg = PlannerConfig { toward_lines: false, ..infer.clone() };
+    plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert!(m.grammars[0].contains("\"[PUTBACK] \"") && m.grammars[0].contains("\"[PUTIN] \""), "{}", m.grammars[0]);
+    // A line the protocol shows (the task's own goal) is never narrowed so.
+    let mut m = Scripted::new(&[&format!("action: {putin}"), "done"]);
+    let shown = PlanRequest { subgoals: vec![APPLE_IN_FRIDGE.to_string()], ..PlanRequest::new("put the apple in the fridge", vec![]) };
+    plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &shown, &defaults(), &mut TraceWriter::sink());
+    assert!(m.grammars[0].contains("\"[PUTBACK] \""), "{}", m.grammars[0]);
 }
