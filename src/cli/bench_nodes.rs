@@ -40,7 +40,8 @@ pub struct NodesArgs {
     /// Most actions per task (keeps the bench short).
     #[arg(long, default_value_t = 20)]
     pub max_actions: usize,
-    /// A free-form instruction on the demo kitchen instead of tasks.
+    /// A free-form instruction on the demo kitchen instead of tasks, planned as `step plan` plans
+    /// it (the root setting its own goal lines).
     #[arg(long)]
     pub instruction: Option<String>,
 }
@@ -116,7 +117,8 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let focus: Vec<u32> = w.nodes().map(|n| n.id).collect();
         let mut env = SimEnv::new(w, focus.clone());
         let req = crate::planner::PlanRequest::new(instr.clone(), focus);
-        let out = crate::planner::plan(&mut engine, &mut env, &req, &cfg.planner, &mut TraceWriter::sink());
+        let main_job = PlannerConfig { infer_goals: true, ..cfg.planner.clone() };
+        let out = crate::planner::plan(&mut engine, &mut env, &req, &main_job, &mut TraceWriter::sink());
         calls.extend(out.stats.calls.into_iter().map(|c| (0, c)));
         n_tasks = 1;
     } else {
