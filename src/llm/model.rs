@@ -148,7 +148,6 @@ struct Scratch {
     o: Vec<f32>,
     g: Vec<f32>,
     u: Vec<f32>,
-    scores: Vec<f32>,
     rope: Vec<f32>,
     q8: Q8Acts,
 }
@@ -263,7 +262,7 @@ impl Transformer {
             kv += f(&l.cache.k) + f(&l.cache.v);
         }
         let s = &self.scratch;
-        let bufs = [&s.x, &s.h, &s.q, &s.k, &s.v, &s.att, &s.o, &s.g, &s.u, &s.scores, &s.rope];
+        let bufs = [&s.x, &s.h, &s.q, &s.k, &s.v, &s.att, &s.o, &s.g, &s.u, &s.rope];
         let scratch = bufs.iter().map(|v| f(v)).sum::<usize>() + s.q8.bytes();
         (weights, kv, scratch)
     }
@@ -424,7 +423,6 @@ impl Layer {
         let per_sub = group.div_ceil(subs);
         let subs = group.div_ceil(per_sub);
         let n_tasks = nkv * subs * qblocks;
-        let scores = SendPtr(fit(&mut s.scores, n_tasks * per_sub * kv_len).as_mut_ptr());
         let att = fit(&mut s.att, t * nh * hd);
         att.fill(0.0);
         let out = SendPtr(att.as_mut_ptr());
@@ -435,18 +433,22 @@ impl Layer {
             let (kvh, sub, qb) = (task % nkv, task / nkv % subs, task / (nkv * subs));
             let first = kvh * group + sub * per_sub;
             let heads = first..(first + per_sub).min((kvh + 1) * group);
-            // SAFETY: each task owns its rows of `scores` and the (query, head) slices of `att` it
-            // writes; both buffers outlive the pool job.
-            let sc = unsafe { std::slice::from_raw_parts_mut(scores.get().add(task * per_sub * kv_len), per_sub * kv_len) };
+            // Each task writes only the (query, head) slices of `att` it owns; the buffer outlives
+            // the pool job.
             let job = HeadBlock { q, keys, values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
             let rows = qb * qblock..((qb + 1) * qblock).min(t);
-            match kernel {
-                // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has AVX2
-                // and FMA.
-                Kernel::Avx2 | Kernel::Avx512 => unsafe { job.run_avx2(rows, sc) },
-                // SAFETY: the portable loops need no CPU feature.
-                Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
-            }
+            // The scores of every (row, head) of the task, in the running thread's own buffer:
+            // its size follows the threads, not the tasks.
+            SCORES.with_borrow_mut(|buf| {
+                let sc = fit(buf, rows.len() * job.heads.len() * kv_len);
+                match kernel {
+                    // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has
+                    // AVX2 and FMA.
+                    Kernel::Avx2 | Kernel::Avx512 => unsafe { job.run_avx2(rows, sc) },
+                    // SAFETY: the portable loops need no CPU feature.
+                    Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
+                }
+            });
         };
         pool::global().run(n_tasks, &task);
         let o = fit(&mut s.o, t * cfg.n_embd);
@@ -473,6 +475,11 @@ struct HeadBlock<'a> {
     out: &'a SendPtr,
 }
 
+thread_local! {
+    /// Attention scores of the task a thread is running (see [`Layer::attention`]).
+    static SCORES: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Keys (and values) per block that the heads of a group go over together: 64 rows of a 64-wide
 /// head are 16 KB, so a block stays in L1 while every head of the group reads it.
 const KEY_BLOCK: usize = 64;
@@ -492,22 +499,37 @@ impl HeadBlock<'_> {
     }
 
     /// # Safety
-    /// `O`'s CPU features must be present; `sc` holds `heads.len()` rows of `kv_len`.
+    /// `O`'s CPU features must be present; `sc` holds `rows.len() × heads.len()` rows of `kv_len`.
+    ///
+    /// Block by block of keys, every query row of the task and every head of the group read the
+    /// block while it is in L1: the cache of one kv head (a megabyte at 2,000 positions) is
+    /// streamed once per task rather than once per query row. Each (row, head) still takes its
+    /// keys in order, so the bits do not depend on the blocking.
     #[inline(always)]
     unsafe fn run<O: AttnOps>(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
         let (hd, kvw, nh, kv_len) = (self.hd, self.kvw, self.nh, self.kv_len);
         let kv = self.kvh * hd;
-        for i in rows {
-            let seen = self.pos + i + 1; // causal: keys 0..=pos+i
-            // Scores, a block of keys at a time for all the group's heads.
-            for j0 in (0..seen).step_by(KEY_BLOCK) {
-                let j1 = (j0 + KEY_BLOCK).min(seen);
+        let ng = self.heads.len();
+        let key = |j: usize| &self.keys[j * kvw + kv..][..hd];
+        // Causal: row i sees keys 0..=pos+i.
+        let seen = |i: usize| self.pos + i + 1;
+        let all = seen(rows.end - 1);
+        // Scores.
+        for j0 in (0..all).step_by(KEY_BLOCK) {
+            for (r, i) in rows.clone().enumerate().filter(|&(_, i)| j0 < seen(i)) {
+                let j1 = (j0 + KEY_BLOCK).min(seen(i));
                 for (g, head) in self.heads.clone().enumerate() {
                     let qi = &self.q[(i * nh + head) * hd..][..hd];
-                    let key = |j: usize| &self.keys[j * kvw + kv..][..hd];
-                    let sc = &mut sc[g * kv_len..];
+                    let sc = &mut sc[(r * ng + g) * kv_len..];
                     let mut j = j0;
-                    // Four keys at a time: four independent multiply-add chains.
+                    // Eight keys at a time, then four: independent multiply-add chains.
+                    while j + 8 <= j1 {
+                        let d = O::dot8(qi, std::array::from_fn(|k| key(j + k)));
+                        for (k, d) in d.into_iter().enumerate() {
+                            sc[j + k] = d * self.scale;
+                        }
+                        j += 8;
+                    }
                     while j + 4 <= j1 {
                         let d = O::dot4(qi, [key(j), key(j + 1), key(j + 2), key(j + 3)]);
                         for (k, d) in d.into_iter().enumerate() {
@@ -520,27 +542,43 @@ impl HeadBlock<'_> {
                     }
                 }
             }
-            // Softmax of each head's scores.
-            for g in 0..self.heads.len() {
-                let sc = &mut sc[g * kv_len..g * kv_len + seen];
-                let max = sc.iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
-                let mut sum = 0f32;
-                for sj in sc.iter_mut() {
-                    *sj = (*sj - max).exp();
-                    sum += *sj;
+        }
+        // Softmax of each (row, head), up to four heads side by side: each sum still takes its
+        // keys in order, but four independent sums overlap instead of each waiting on its own
+        // previous add.
+        for (r, i) in rows.clone().enumerate() {
+            let n = seen(i);
+            for g0 in (0..ng).step_by(4) {
+                let hs = (ng - g0).min(4);
+                let at = |h: usize| (r * ng + g0 + h) * kv_len;
+                let (mut max, mut sum) = ([f32::NEG_INFINITY; 4], [0f32; 4]);
+                for h in 0..hs {
+                    max[h] = sc[at(h)..][..n].iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
                 }
-                let inv = 1.0 / sum;
-                sc.iter_mut().for_each(|p| *p *= inv);
+                for j in 0..n {
+                    for h in 0..hs {
+                        let e = &mut sc[at(h) + j];
+                        *e = (*e - max[h]).exp();
+                        sum[h] += *e;
+                    }
+                }
+                for h in 0..hs {
+                    let inv = 1.0 / sum[h];
+                    sc[at(h)..][..n].iter_mut().for_each(|p| *p *= inv);
+                }
             }
-            // The weighted sums, a block of values at a time for all the heads: each output
-            // element still takes its keys in order (the sum goes through `y` between blocks,
-            // exactly).
-            for j0 in (0..seen).step_by(KEY_BLOCK) {
-                let j1 = (j0 + KEY_BLOCK).min(seen);
+        }
+        // The weighted sums, a block of values at a time for every row and head: each output
+        // element still takes its keys in order (the sum goes through `y` between blocks,
+        // exactly).
+        for j0 in (0..all).step_by(KEY_BLOCK) {
+            for (r, i) in rows.clone().enumerate().filter(|&(_, i)| j0 < seen(i)) {
+                let j1 = (j0 + KEY_BLOCK).min(seen(i));
                 for (g, head) in self.heads.clone().enumerate() {
                     // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
                     let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * nh + head) * hd), hd) };
-                    O::weighted_sum(y, &sc[g * kv_len + j0..g * kv_len + j1], &self.values[j0 * kvw + kv..], kvw);
+                    let p = &sc[(r * ng + g) * kv_len..];
+                    O::weighted_sum(y, &p[j0..j1], &self.values[j0 * kvw + kv..], kvw);
                 }
             }
         }
@@ -688,51 +726,54 @@ mod tests {
     fn grouped_attention_equals_one_head_at_a_time_bit_for_bit() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(23);
-        let (nh, nkv, hd, pos, t) = (6, 2, 64, 150, 3);
-        let (kvw, kv_len, group) = (nkv * hd, pos + t, nh / nkv);
-        let mut r = |n: usize| (0..n).map(|_| rng.random_range(-2.0f32..2.0)).collect::<Vec<_>>();
-        let (q, keys, values) = (r(t * nh * hd), r(kv_len * kvw), r(kv_len * kvw));
-        let scale = 0.125;
-        let avx2 = super::super::kernels::avx2::available();
-        for simd in [false, true] {
-            if simd && !avx2 {
-                eprintln!("skipped the AVX2 half: this CPU has no AVX2/FMA");
-                continue;
-            }
-            let mut want = vec![0f32; t * nh * hd];
-            for i in 0..t {
-                let seen = pos + i + 1;
-                for h in 0..nh {
-                    let (qi, y) = (&q[(i * nh + h) * hd..][..hd], &mut want[(i * nh + h) * hd..][..hd]);
-                    let (k, v, kv) = (&keys[..seen * kvw], &values[..seen * kvw], h / group * hd);
-                    #[cfg(target_arch = "x86_64")]
-                    if simd {
-                        one_head::<super::super::kernels::attn::Avx2>(qi, k, v, kvw, kv, scale, y);
-                        continue;
-                    }
-                    one_head::<Portable>(qi, k, v, kvw, kv, scale, y);
+        // A few rows far into the cache, and rows that straddle key blocks.
+        for (pos, t) in [(150, 3), (70, 21)] {
+            let (nh, nkv, hd) = (6, 2, 64);
+            let (kvw, kv_len, group) = (nkv * hd, pos + t, nh / nkv);
+            let mut r = |n: usize| (0..n).map(|_| rng.random_range(-2.0f32..2.0)).collect::<Vec<_>>();
+            let (q, keys, values) = (r(t * nh * hd), r(kv_len * kvw), r(kv_len * kvw));
+            let scale = 0.125;
+            let avx2 = super::super::kernels::avx2::available();
+            for simd in [false, true] {
+                if simd && !avx2 {
+                    eprintln!("skipped the AVX2 half: this CPU has no AVX2/FMA");
+                    continue;
                 }
-            }
-            for per_sub in [1, 2, 3] {
-                let mut got = vec![0f32; t * nh * hd];
-                let out = SendPtr(got.as_mut_ptr());
-                for kvh in 0..nkv {
-                    for first in (kvh * group..(kvh + 1) * group).step_by(per_sub) {
-                        let heads = first..(first + per_sub).min((kvh + 1) * group);
-                        let mut sc = vec![0f32; per_sub * kv_len];
-                        let job = HeadBlock { q: &q, keys: &keys, values: &values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
-                        // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
-                        unsafe {
-                            if simd {
-                                job.run_avx2(0..t, &mut sc)
-                            } else {
-                                job.run::<Portable>(0..t, &mut sc)
-                            }
-                        };
+                let mut want = vec![0f32; t * nh * hd];
+                for i in 0..t {
+                    let seen = pos + i + 1;
+                    for h in 0..nh {
+                        let (qi, y) = (&q[(i * nh + h) * hd..][..hd], &mut want[(i * nh + h) * hd..][..hd]);
+                        let (k, v, kv) = (&keys[..seen * kvw], &values[..seen * kvw], h / group * hd);
+                        #[cfg(target_arch = "x86_64")]
+                        if simd {
+                            one_head::<super::super::kernels::attn::Avx2>(qi, k, v, kvw, kv, scale, y);
+                            continue;
+                        }
+                        one_head::<Portable>(qi, k, v, kvw, kv, scale, y);
                     }
                 }
-                let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
-                assert!(same, "simd {simd}, {per_sub} heads per task");
+                for per_sub in [1, 2, 3] {
+                    let mut got = vec![0f32; t * nh * hd];
+                    let out = SendPtr(got.as_mut_ptr());
+                    for kvh in 0..nkv {
+                        for first in (kvh * group..(kvh + 1) * group).step_by(per_sub) {
+                            let heads = first..(first + per_sub).min((kvh + 1) * group);
+                            let mut sc = vec![0f32; t * per_sub * kv_len];
+                            let job = HeadBlock { q: &q, keys: &keys, values: &values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
+                            // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
+                            unsafe {
+                                if simd {
+                                    job.run_avx2(0..t, &mut sc)
+                                } else {
+                                    job.run::<Portable>(0..t, &mut sc)
+                                }
+                            };
+                        }
+                    }
+                    let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(same, "simd {simd}, {per_sub} heads per task, {t} rows after {pos}");
+                }
             }
         }
     }

@@ -22,6 +22,13 @@ pub trait AttnOps {
     /// As [`AttnOps::dot`].
     unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4];
 
+    /// Eight [`AttnOps::dot`]s of `a` with `b[0..8]`, each the same bits as alone: eight chains
+    /// keep both FMA pipes busy, and the eight lane reductions share their shuffles.
+    ///
+    /// # Safety
+    /// As [`AttnOps::dot`].
+    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8];
+
     /// For every element `e` of `y`: `y[e] = fma(p[j], values[j * stride + e], y[e])` for each `j`
     /// in order.
     ///
@@ -53,6 +60,11 @@ impl AttnOps for Portable {
 
     #[inline(always)]
     unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
+        b.map(|b| Self::dot(a, b))
+    }
+
+    #[inline(always)]
+    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
         b.map(|b| Self::dot(a, b))
     }
 
@@ -117,6 +129,45 @@ impl AttnOps for Avx2 {
                 s = a.get_unchecked(e).mul_add(*b[k].get_unchecked(e), s);
             }
             out[k] = s;
+        }
+        out
+    }
+
+    #[inline(always)]
+    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
+        use std::arch::x86_64::*;
+        let n = b.iter().fold(a.len(), |n, b| n.min(b.len()));
+        let mut acc = [_mm256_setzero_ps(); 8];
+        let mut c = 0;
+        while c + 8 <= n {
+            let x = _mm256_loadu_ps(a.as_ptr().add(c));
+            for k in 0..8 {
+                acc[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(b[k].as_ptr().add(c)), acc[k]);
+            }
+            c += 8;
+        }
+        // The reductions of `dot`, eight keys side by side; every sum has the same two operands
+        // as there. m = lo + hi half of each key: [m(k) | m(k+1)] per pair of keys.
+        let m = |k: usize| {
+            let lo = _mm256_permute2f128_ps::<0x20>(acc[k], acc[k + 1]);
+            let hi = _mm256_permute2f128_ps::<0x31>(acc[k], acc[k + 1]);
+            _mm256_add_ps(lo, hi)
+        };
+        let (m01, m23, m45, m67) = (m(0), m(2), m(4), m(6));
+        // n = (m0 + m2, m1 + m3) of each key: [k0 k2 | k1 k3] and [k4 k6 | k5 k7].
+        let pairs = |x: __m256, y: __m256| {
+            _mm256_add_ps(_mm256_shuffle_ps::<0b01_00_01_00>(x, y), _mm256_shuffle_ps::<0b11_10_11_10>(x, y))
+        };
+        let (n0, n1) = (pairs(m01, m23), pairs(m45, m67));
+        // n0 + n1 of each key: [k0 k2 k4 k6 | k1 k3 k5 k7], then into key order.
+        let r = _mm256_add_ps(_mm256_shuffle_ps::<0b10_00_10_00>(n0, n1), _mm256_shuffle_ps::<0b11_01_11_01>(n0, n1));
+        let r = _mm256_permutevar8x32_ps(r, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
+        let mut out = [0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), r);
+        for (k, s) in out.iter_mut().enumerate() {
+            for e in c..n {
+                *s = a.get_unchecked(e).mul_add(*b[k].get_unchecked(e), *s);
+            }
         }
         out
     }

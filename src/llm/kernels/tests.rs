@@ -171,6 +171,16 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
             assert_eq!(one.to_bits(), x4[k].to_bits(), "portable dot4, hd {hd}");
             assert_eq!(one.to_bits(), y4[k].to_bits(), "avx2 dot4, hd {hd}");
         }
+        let keys: Vec<Vec<f32>> = (0..8).map(|_| randn(&mut rng, hd)).collect();
+        let eight: [&[f32]; 8] = std::array::from_fn(|k| &keys[k][..]);
+        // SAFETY: as above.
+        let (x8, y8) = unsafe { (Portable::dot8(&a, eight), attn::Avx2::dot8(&a, eight)) };
+        for k in 0..8 {
+            // SAFETY: the portable loop needs no CPU feature.
+            let one = unsafe { Portable::dot(&a, eight[k]) };
+            assert_eq!(one.to_bits(), x8[k].to_bits(), "portable dot8, hd {hd}, key {k}");
+            assert_eq!(one.to_bits(), y8[k].to_bits(), "avx2 dot8, hd {hd}, key {k}");
+        }
         for keys in [1, 7, 40] {
             let stride = hd + 24;
             let values = randn(&mut rng, keys * stride);
