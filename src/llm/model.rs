@@ -522,20 +522,13 @@ impl HeadBlock<'_> {
                     let qi = &self.q[(i * nh + head) * hd..][..hd];
                     let sc = &mut sc[(r * ng + g) * kv_len..];
                     let mut j = j0;
-                    // Eight keys at a time, then four: independent multiply-add chains.
+                    // Eight keys at a time: independent multiply-add chains.
                     while j + 8 <= j1 {
                         let d = O::dot8(qi, std::array::from_fn(|k| key(j + k)));
                         for (k, d) in d.into_iter().enumerate() {
                             sc[j + k] = d * self.scale;
                         }
                         j += 8;
-                    }
-                    while j + 4 <= j1 {
-                        let d = O::dot4(qi, [key(j), key(j + 1), key(j + 2), key(j + 3)]);
-                        for (k, d) in d.into_iter().enumerate() {
-                            sc[j + k] = d * self.scale;
-                        }
-                        j += 4;
                     }
                     for j in j..j1 {
                         sc[j] = O::dot(qi, key(j)) * self.scale;

@@ -4,6 +4,8 @@
 //! came out two floats wide, with the output row going through memory for every key.
 
 use super::reduce_lanes;
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
 
 /// The loops; the caller's attention code is generic over the implementation, so the AVX2 one
 /// inlines into a function compiled with those features.
@@ -15,15 +17,9 @@ pub trait AttnOps {
     /// The implementation's CPU features must be present.
     unsafe fn dot(a: &[f32], b: &[f32]) -> f32;
 
-    /// Four [`AttnOps::dot`]s of `a` with `b[0..4]`, each the same bits as alone. One dot is a
-    /// single chain of dependent multiply-adds (latency-bound); four independent ones overlap.
-    ///
-    /// # Safety
-    /// As [`AttnOps::dot`].
-    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4];
-
-    /// Eight [`AttnOps::dot`]s of `a` with `b[0..8]`, each the same bits as alone: eight chains
-    /// keep both FMA pipes busy, and the eight lane reductions share their shuffles.
+    /// Eight [`AttnOps::dot`]s of `a` with `b[0..8]`, each the same bits as alone. One dot is a
+    /// single chain of dependent multiply-adds (latency-bound); eight independent chains keep both
+    /// FMA pipes busy, and their lane reductions share their shuffles.
     ///
     /// # Safety
     /// As [`AttnOps::dot`].
@@ -59,11 +55,6 @@ impl AttnOps for Portable {
     }
 
     #[inline(always)]
-    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
-        b.map(|b| Self::dot(a, b))
-    }
-
-    #[inline(always)]
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
         b.map(|b| Self::dot(a, b))
     }
@@ -84,68 +75,48 @@ impl AttnOps for Portable {
 pub struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
-impl AttnOps for Avx2 {
+impl Avx2 {
+    /// The lane sums of `a·b[k]` over the whole eight-float chunks (lane `l` takes elements
+    /// `8c + l`, fused in order), and the range of tail elements left for the caller.
     #[inline(always)]
-    unsafe fn dot(a: &[f32], b: &[f32]) -> f32 {
-        use std::arch::x86_64::*;
-        let n = a.len().min(b.len());
-        let mut acc = _mm256_setzero_ps();
-        let mut c = 0;
-        while c + 8 <= n {
-            acc = _mm256_fmadd_ps(_mm256_loadu_ps(a.as_ptr().add(c)), _mm256_loadu_ps(b.as_ptr().add(c)), acc);
-            c += 8;
-        }
-        // ((l0+l4)+(l2+l6)) + ((l1+l5)+(l3+l7)), as `reduce_lanes`.
-        let s = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
-        let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
-        let mut s = _mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<1>(s, s)));
-        while c < n {
-            s = a.get_unchecked(c).mul_add(*b.get_unchecked(c), s);
-            c += 1;
-        }
-        s
-    }
-
-    #[inline(always)]
-    unsafe fn dot4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
-        use std::arch::x86_64::*;
+    unsafe fn lane_sums<const K: usize>(a: &[f32], b: [&[f32]; K]) -> ([__m256; K], std::ops::Range<usize>) {
         let n = b.iter().fold(a.len(), |n, b| n.min(b.len()));
-        let mut acc = [_mm256_setzero_ps(); 4];
+        let mut acc = [_mm256_setzero_ps(); K];
         let mut c = 0;
         while c + 8 <= n {
             let x = _mm256_loadu_ps(a.as_ptr().add(c));
-            for k in 0..4 {
-                acc[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(b[k].as_ptr().add(c)), acc[k]);
+            for (acc, b) in acc.iter_mut().zip(b) {
+                *acc = _mm256_fmadd_ps(x, _mm256_loadu_ps(b.as_ptr().add(c)), *acc);
             }
             c += 8;
         }
-        let mut out = [0f32; 4];
-        for k in 0..4 {
-            // As `dot`: the lanes reduced as `reduce_lanes`, then the tail fused in order.
-            let s = _mm_add_ps(_mm256_castps256_ps128(acc[k]), _mm256_extractf128_ps::<1>(acc[k]));
-            let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
-            let mut s = _mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<1>(s, s)));
-            for e in c..n {
-                s = a.get_unchecked(e).mul_add(*b[k].get_unchecked(e), s);
-            }
-            out[k] = s;
+        (acc, c..n)
+    }
+
+    /// `s` with the tail elements of `a·b` fused in, in order.
+    #[inline(always)]
+    unsafe fn fuse_tail(mut s: f32, a: &[f32], b: &[f32], tail: std::ops::Range<usize>) -> f32 {
+        for e in tail {
+            s = a.get_unchecked(e).mul_add(*b.get_unchecked(e), s);
         }
-        out
+        s
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl AttnOps for Avx2 {
+    #[inline(always)]
+    unsafe fn dot(a: &[f32], b: &[f32]) -> f32 {
+        let ([acc], tail) = Self::lane_sums(a, [b]);
+        // ((l0+l4)+(l2+l6)) + ((l1+l5)+(l3+l7)), as `reduce_lanes`.
+        let s = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+        let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+        Self::fuse_tail(_mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<1>(s, s))), a, b, tail)
     }
 
     #[inline(always)]
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
-        use std::arch::x86_64::*;
-        let n = b.iter().fold(a.len(), |n, b| n.min(b.len()));
-        let mut acc = [_mm256_setzero_ps(); 8];
-        let mut c = 0;
-        while c + 8 <= n {
-            let x = _mm256_loadu_ps(a.as_ptr().add(c));
-            for k in 0..8 {
-                acc[k] = _mm256_fmadd_ps(x, _mm256_loadu_ps(b[k].as_ptr().add(c)), acc[k]);
-            }
-            c += 8;
-        }
+        let (acc, tail) = Self::lane_sums(a, b);
         // The reductions of `dot`, eight keys side by side; every sum has the same two operands
         // as there. m = lo + hi half of each key: [m(k) | m(k+1)] per pair of keys.
         let m = |k: usize| {
@@ -164,17 +135,14 @@ impl AttnOps for Avx2 {
         let r = _mm256_permutevar8x32_ps(r, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
         let mut out = [0f32; 8];
         _mm256_storeu_ps(out.as_mut_ptr(), r);
-        for (k, s) in out.iter_mut().enumerate() {
-            for e in c..n {
-                *s = a.get_unchecked(e).mul_add(*b[k].get_unchecked(e), *s);
-            }
+        for (s, b) in out.iter_mut().zip(b) {
+            *s = Self::fuse_tail(*s, a, b, tail.clone());
         }
         out
     }
 
     #[inline(always)]
     unsafe fn weighted_sum(y: &mut [f32], p: &[f32], values: &[f32], stride: usize) {
-        use std::arch::x86_64::*;
         debug_assert!(p.is_empty() || values.len() >= (p.len() - 1) * stride + y.len());
         let (hd, v) = (y.len(), values.as_ptr());
         let mut e = 0;

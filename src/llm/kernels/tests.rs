@@ -161,16 +161,6 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
         // SAFETY: AVX2 and FMA are present (checked above).
         let (x, y) = unsafe { (Portable::dot(&a, &b), attn::Avx2::dot(&a, &b)) };
         assert_eq!(x.to_bits(), y.to_bits(), "dot, hd {hd}");
-        let keys: Vec<Vec<f32>> = (0..4).map(|_| randn(&mut rng, hd)).collect();
-        let four = [&keys[0][..], &keys[1][..], &keys[2][..], &keys[3][..]];
-        // SAFETY: as above.
-        let (x4, y4) = unsafe { (Portable::dot4(&a, four), attn::Avx2::dot4(&a, four)) };
-        for k in 0..4 {
-            // SAFETY: the portable loop needs no CPU feature.
-            let one = unsafe { Portable::dot(&a, four[k]) };
-            assert_eq!(one.to_bits(), x4[k].to_bits(), "portable dot4, hd {hd}");
-            assert_eq!(one.to_bits(), y4[k].to_bits(), "avx2 dot4, hd {hd}");
-        }
         let keys: Vec<Vec<f32>> = (0..8).map(|_| randn(&mut rng, hd)).collect();
         let eight: [&[f32]; 8] = std::array::from_fn(|k| &keys[k][..]);
         // SAFETY: as above.
