@@ -15,6 +15,8 @@ fn repo() -> PathBuf {
 fn step() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_step"));
     c.env_remove("RUST_LOG");
+    // Prefix snapshots of the runs that load a model go under the build's temporary directory.
+    c.env("STEP_PREFIX_CACHE", env!("CARGO_TARGET_TMPDIR"));
     c
 }
 

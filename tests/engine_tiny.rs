@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use step::action::{ObjRef, Verb};
 use step::grammar::{parse_actions, ActionGrammar, VerbSpec};
 use step::llm::chat::Message;
-use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
+use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason, WarmSource};
 use step::llm::gguf::GgufFile;
 use step::llm::model::{argmax, Transformer};
 use step::llm::sample::Sampling;
@@ -311,4 +311,83 @@ fn streamed_pieces_concatenate_to_the_final_text() {
             }
         }
     }
+}
+
+#[test]
+fn a_prefix_snapshot_gives_the_bits_of_computing_the_prefix() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("prefix");
+    for spec in [TinySpec::llama(), TinySpec::qwen2().with_seed(5)] {
+        let path = tiny(spec, &dir);
+        let system = vec![Message::system("You plan for a household robot, one step at a time. ".repeat(4))];
+        let prompt = Prompt::Chat(vec![system[0].clone(), Message::user("put the apple in the fridge")]);
+        let conts = ["[WALK] <apple> (12)\n".to_string(), "done\n".to_string()];
+        let engine = |dir: Option<&std::path::Path>| {
+            let mut e = Engine::load(&path).unwrap();
+            e.set_prefix_dir(dir.map(|d| d.to_path_buf()));
+            e
+        };
+        // No snapshot directory: warming does nothing, the call computes everything.
+        let mut cold = engine(None);
+        assert_eq!(cold.warm(&system).unwrap().source, WarmSource::None);
+        let want = cold.score(&prompt, &conts).unwrap();
+        assert_eq!(want.reused_tokens, 0);
+
+        let mut first = engine(Some(&store));
+        let w = first.warm(&system).unwrap();
+        assert_eq!((w.source, w.note.as_deref()), (WarmSource::Computed, None));
+        assert!(w.tokens > 50, "{w:?}");
+        let snapshot = w.snapshot.clone().unwrap();
+        assert!(snapshot.exists());
+        let got = first.score(&prompt, &conts).unwrap();
+        assert_eq!(got.scores, want.scores);
+        assert_eq!(got.reused_tokens, w.tokens, "the prompt starts with the warmed tokens");
+        assert_eq!(first.warm(&system).unwrap().source, WarmSource::Cached);
+
+        // A new process reads the snapshot: the same numbers, bit for bit.
+        let mut second = engine(Some(&store));
+        let w2 = second.warm(&system).unwrap();
+        assert_eq!((w2.source, &w2.snapshot), (WarmSource::Loaded, &w.snapshot));
+        assert_eq!(second.score(&prompt, &conts).unwrap().scores, want.scores);
+
+        // A damaged or truncated snapshot is said, recomputed and rewritten; never an error.
+        let mut bytes = std::fs::read(&snapshot).unwrap();
+        let mid = bytes.len() / 2;
+        bytes[mid] ^= 0x40;
+        std::fs::write(&snapshot, &bytes).unwrap();
+        let mut third = engine(Some(&store));
+        let w3 = third.warm(&system).unwrap();
+        assert_eq!(w3.source, WarmSource::Computed);
+        assert!(w3.note.as_deref().unwrap_or_default().contains("checksum"), "{w3:?}");
+        assert_eq!(third.score(&prompt, &conts).unwrap().scores, want.scores);
+        std::fs::write(&snapshot, &bytes[..mid]).unwrap();
+        let w4 = engine(Some(&store)).warm(&system).unwrap();
+        assert_eq!(w4.source, WarmSource::Computed);
+        assert!(w4.note.as_deref().unwrap_or_default().contains("not a usable prefix snapshot"), "{w4:?}");
+        assert_eq!(engine(Some(&store)).warm(&system).unwrap().source, WarmSource::Loaded);
+
+        // Another system message is another snapshot.
+        let other = vec![Message::system("You plan for a robot arm.")];
+        let w5 = engine(Some(&store)).warm(&other).unwrap();
+        assert_eq!(w5.source, WarmSource::Computed);
+        assert_ne!(w5.snapshot, w.snapshot);
+    }
+}
+
+#[test]
+fn an_unwritable_prefix_directory_costs_time_not_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = tiny(TinySpec::llama(), &dir);
+    // A file where the directory should be: nothing can be created under it.
+    let blocked = dir.path().join("not-a-dir");
+    std::fs::write(&blocked, b"x").unwrap();
+    let mut e = Engine::load(&path).unwrap();
+    e.set_prefix_dir(Some(blocked.join("prefix")));
+    let system = vec![Message::system("You are a robot planner.")];
+    let w = e.warm(&system).unwrap();
+    assert_eq!(w.source, WarmSource::Computed);
+    assert!(w.note.as_deref().unwrap_or_default().contains("cannot write the prefix snapshot"), "{w:?}");
+    let p = Prompt::Chat(vec![system[0].clone(), Message::user("go")]);
+    let g = e.generate(&p, None, &GenOptions { max_tokens: 4, ..Default::default() }).unwrap();
+    assert!(g.reused_tokens > 0);
 }

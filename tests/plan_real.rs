@@ -25,25 +25,43 @@ fn smollm2() -> Option<PathBuf> {
 fn step_plan_on_the_demo_scene_ends_cleanly_with_a_complete_trace() {
     let Some(model) = smollm2() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let trace = dir.path().join("plan.jsonl");
-    let out = Command::new(env!("CARGO_BIN_EXE_step"))
-        .args(["plan", "put the apple in the fridge", "--max-llm-calls", "4", "--json", "--quiet", "--model"])
-        .arg(&model)
-        .arg("--trace")
-        .arg(&trace)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cache = dir.path().join("prefix");
+    let plan = |trace: &std::path::Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_step"))
+            .args(["plan", "put the apple in the fridge", "--max-llm-calls", "4", "--json", "--quiet", "--model"])
+            .arg(&model)
+            .arg("--trace")
+            .arg(trace)
+            .arg("--prefix-cache")
+            .arg(&cache)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{stderr}");
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let events: Vec<Value> =
+            std::fs::read_to_string(trace).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        (v, events)
+    };
+    let (v, events) = plan(&dir.path().join("plan.jsonl"));
     let stop = v["stop"]["stop"].as_str().unwrap();
     assert!(stop == "done" || stop == "budget", "{}", v["stop"]);
     assert!(v["stats"]["llm_calls"].as_u64().unwrap() <= 4);
-    let events: Vec<Value> =
-        std::fs::read_to_string(&trace).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(events.first().unwrap()["event"], "header");
     assert_eq!(events.last().unwrap()["event"], "end");
-    let calls = events.iter().filter(|e| e["event"] == "call").count() as u64;
+    let calls: Vec<&Value> = events.iter().filter(|e| e["event"] == "call").collect();
     // Calls that ended on the token limit are counted but logged as call_error events.
-    assert!(calls <= v["stats"]["llm_calls"].as_u64().unwrap());
+    assert!(calls.len() as u64 <= v["stats"]["llm_calls"].as_u64().unwrap());
+    let warm = |events: &[Value]| events.iter().find(|e| e["event"] == "warm").cloned().unwrap();
+    assert_eq!(warm(&events)["source"], "computed", "{}", warm(&events));
+
+    // The next run reads the system message from its snapshot and plans exactly the same.
+    let (again, events2) = plan(&dir.path().join("again.jsonl"));
+    assert_eq!(warm(&events2)["source"], "loaded", "{}", warm(&events2));
+    assert_eq!(again["plan"], v["plan"]);
+    let outputs = |ev: &[Value]| ev.iter().filter(|e| e["event"] == "call").map(|e| e["output"].clone()).collect::<Vec<_>>();
+    assert_eq!(outputs(&events2), outputs(&events));
+    let first_call = |ev: &[Value]| ev.iter().find(|e| e["event"] == "call").map(|e| e["reused_tokens"].clone());
+    assert_eq!(first_call(&events2), first_call(&events));
+    assert!(first_call(&events2).and_then(|r| r.as_u64()).unwrap_or(0) >= warm(&events)["tokens"].as_u64().unwrap());
 }

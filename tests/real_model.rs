@@ -6,7 +6,8 @@ use std::path::PathBuf;
 
 use step::grammar::parse_actions;
 use step::scene_grammar::demo_kitchen_grammar;
-use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason};
+use step::llm::chat::Message;
+use step::llm::engine::{Engine, GenOptions, Generate, Prompt, StopReason, WarmSource};
 
 fn smollm2() -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models/SmolLM2-135M-Instruct.Q4_1.gguf");
@@ -45,4 +46,28 @@ fn smollm2_writes_a_parseable_action_list_and_the_same_one_twice() {
     let third = engine.generate(&Prompt::Text(PROMPT.into()), Some(&lark), &opts).unwrap();
     assert_eq!(third.text, first.text);
     assert_eq!(third.reused_tokens, third.prompt_tokens - 1);
+}
+
+/// The quantised kernels, for real: the planner's system message read back from a prefix snapshot
+/// scores a continuation exactly as computing it does (the first 200-odd tokens of it, so that the
+/// prefix spans more than one 128-token batch and the test stays short in a debug build).
+#[test]
+fn smollm2_prefix_snapshot_scores_bit_for_bit() {
+    let Some(path) = smollm2() else { return };
+    let text: String = step::planner::prompt::system_message().chars().take(900).collect();
+    let system = vec![Message::system(text)];
+    let prompt = Prompt::Chat(vec![system[0].clone(), Message::user("Task: put the apple in the fridge\nNext step?")]);
+    let conts = ["action: [WALK] <apple> (12)".to_string(), "done".to_string()];
+    let want = Engine::load(&path).unwrap().score(&prompt, &conts).unwrap();
+    let store = tempfile::tempdir().unwrap();
+    for expected in [WarmSource::Computed, WarmSource::Loaded] {
+        let mut e = Engine::load(&path).unwrap();
+        e.set_prefix_dir(Some(store.path().to_path_buf()));
+        let w = e.warm(&system).unwrap();
+        assert_eq!(w.source, expected, "{w:?}");
+        assert!(w.tokens > 128, "{w:?}");
+        let got = e.score(&prompt, &conts).unwrap();
+        assert_eq!(got.reused_tokens, w.tokens);
+        assert_eq!(got.scores, want.scores);
+    }
 }

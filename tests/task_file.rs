@@ -106,7 +106,11 @@ fn bad_files_and_scenes_say_what_is_wrong() {
 }
 
 fn step_cmd(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_step")).args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_step"))
+        .args(args)
+        .env("STEP_PREFIX_CACHE", env!("CARGO_TARGET_TMPDIR"))
+        .output()
+        .unwrap();
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

@@ -35,7 +35,8 @@ pub fn parse_plan_format(s: &str) -> Result<PlanFormat, String> {
     s.parse::<PlanFormat>().map_err(|e| e.to_string())
 }
 
-/// Knobs of the commands that run inference (`generate`, `bench llm`).
+/// Knobs of the commands that run inference (`generate`, `bench llm`, `plan`, `replay`, `eval plan`,
+/// `bench nodes`).
 #[derive(Args, Debug, Clone, Default)]
 pub struct InferenceArgs {
     /// CPU threads for inference: a count (more than the machine has is capped, with a warning), or
@@ -43,6 +44,15 @@ pub struct InferenceArgs {
     /// one). `STEP_THREADS` in the environment is used when this is not given.
     #[arg(long, value_parser = parse_threads, value_name = "N|auto")]
     pub threads: Option<Threads>,
+    /// Where the planner's system message is kept between runs, as a snapshot of its keys and values
+    /// (default: `$STEP_PREFIX_CACHE`, else `$XDG_CACHE_HOME/step/prefix`, else
+    /// `~/.cache/step/prefix`). It saves the first model call most of its time; a snapshot is used
+    /// only by the same build, model file and CPU kind, and the 4 newest are kept.
+    #[arg(long, value_name = "DIR")]
+    pub prefix_cache: Option<PathBuf>,
+    /// Neither read nor write prefix snapshots: the first call computes the system message.
+    #[arg(long, conflicts_with = "prefix_cache")]
+    pub no_prefix_cache: bool,
 }
 
 /// `--threads`: a count, or `auto`.
@@ -64,6 +74,14 @@ fn parse_threads(s: &str) -> Result<Threads, String> {
 }
 
 impl InferenceArgs {
+    /// The prefix-snapshot directory these flags ask for (none with `--no-prefix-cache`).
+    pub fn prefix_dir(&self) -> Option<PathBuf> {
+        if self.no_prefix_cache {
+            return None;
+        }
+        self.prefix_cache.clone().or_else(crate::llm::prefix::default_dir)
+    }
+
     /// Sizes candle's worker pool. candle reads these variables the first time it is used, so this
     /// runs before any model is loaded.
     pub fn apply(&self) {

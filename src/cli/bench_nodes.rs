@@ -13,7 +13,7 @@ use super::args::TaskArgs;
 use crate::eval::plans::{self, EvalEnv, PlanEvalConfig};
 use crate::eval::protocol::Seen;
 use crate::planner::Strength;
-use crate::llm::engine::Engine;
+use crate::llm::engine::{Engine, Warm};
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
 use crate::planner::{CallRecord, PlannerConfig, PlannerKind, SimEnv, TraceWriter};
 
@@ -31,6 +31,8 @@ pub struct NodesArgs {
     pub protocol: Seen,
     #[command(flatten)]
     pub tasks: TaskArgs,
+    #[command(flatten)]
+    pub inference: super::args::InferenceArgs,
     /// Only these task ids (repeatable); default: every 30th EAI task, or the whole task file.
     #[arg(long = "task", value_name = "ID")]
     pub only: Vec<String>,
@@ -95,13 +97,19 @@ struct NodesReport {
     by_role: BTreeMap<String, Group>,
     /// Every call of a tree node together (a node is decomposed and judged).
     per_node: Group,
+    /// Before the first node: loading the model, and the system message put in its cache (read
+    /// from its snapshot, or computed); not in the node figures.
+    model_load_ms: f64,
+    prefix: Option<Warm>,
     wall_s: f64,
 }
 
 pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let path = resolve_model(&a.model)?;
+    a.inference.apply();
     let mut engine = Engine::load(&path)?;
+    engine.set_prefix_dir(a.inference.prefix_dir());
     let mut cfg = PlanEvalConfig {
         planner: PlannerConfig { kind: a.planner, strength: a.grammar, ..PlannerConfig::default() },
         seen: a.protocol,
@@ -111,6 +119,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     cfg.planner.budgets.max_actions = a.max_actions;
     // Every call, with the task it came from (node ids restart at each task).
     let mut calls: Vec<(usize, CallRecord)> = Vec::new();
+    let mut prefix = None;
     let n_tasks;
     if let Some(instr) = &a.instruction {
         let w = crate::world::World::demo();
@@ -120,6 +129,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let main_job = PlannerConfig { infer_goals: true, ..cfg.planner.clone() };
         let out = crate::planner::plan(&mut engine, &mut env, &req, &main_job, &mut TraceWriter::sink());
         calls.extend(out.stats.calls.into_iter().map(|c| (0, c)));
+        prefix = out.stats.warm;
         n_tasks = 1;
     } else {
         let source = a.tasks.source();
@@ -130,6 +140,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         for (i, t) in tasks.iter().enumerate() {
             eprintln!("[{}/{}] {} ({})", i + 1, tasks.len(), t.id, t.title);
             let (_, stats) = plans::run_task_stats(&mut engine, t, &cfg);
+            prefix = prefix.or(stats.warm);
             calls.extend(stats.calls.into_iter().map(|c| (i, c)));
         }
     }
@@ -163,6 +174,8 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         tasks: n_tasks,
         by_role,
         per_node: group(&node_refs),
+        model_load_ms: engine.load_ms(),
+        prefix,
         wall_s: t0.elapsed().as_secs_f64(),
     };
     eprintln!(
@@ -186,6 +199,11 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
             100.0 * g.mask_share
         );
     }
+    let how = match &report.prefix {
+        Some(w) => format!("system message {} tokens {:?} in {:.0} ms", w.tokens, w.source, w.ms).to_lowercase(),
+        None => "system message computed by the first call".into(),
+    };
+    eprintln!("before the first node: model loaded in {:.0} ms, {how}", report.model_load_ms);
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }

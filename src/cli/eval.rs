@@ -15,7 +15,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use super::args::TaskArgs;
+use super::args::{InferenceArgs, TaskArgs};
 use crate::eval::plans::{self, EvalEnv, NoModel, PlanEvalConfig, PlanEvalReport};
 use crate::eval::protocol::Seen;
 use crate::eval::{score, PlanInput, Summary, TaskReport};
@@ -58,6 +58,8 @@ pub struct PlanArgs {
     pub env: EvalEnv,
     #[command(flatten)]
     pub tasks: TaskArgs,
+    #[command(flatten)]
+    pub inference: InferenceArgs,
     /// Only these task ids (repeatable).
     #[arg(long = "task", value_name = "ID")]
     pub only: Vec<String>,
@@ -148,6 +150,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
 
 fn plan(a: PlanArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
+    a.inference.apply();
     let tty = std::io::stderr().is_terminal();
     let source = a.tasks.source();
     let only = (!a.only.is_empty()).then_some(a.only.as_slice());
@@ -192,7 +195,9 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
         Box::new(NoModel)
     } else {
         let path = resolve_model(&a.model)?;
-        Box::new(Engine::load(&path)?)
+        let mut engine = Engine::load(&path)?;
+        engine.set_prefix_dir(a.inference.prefix_dir());
+        Box::new(engine)
     };
     let bar = tty.then(|| {
         let b = ProgressBar::new(tasks.len() as u64);

@@ -183,6 +183,18 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             "verdict" => {
                 eprintln!("{}    -> {}", indent(node, &depth_of), v["verdict"].as_str().unwrap_or(""));
             }
+            "warm" => match v["source"].as_str() {
+                Some(source) if source != "cached" => {
+                    let how = if source == "loaded" { "read from its snapshot" } else { "computed, snapshot written" };
+                    let note = v["note"].as_str().map(|n| format!(" ({n})")).unwrap_or_default();
+                    eprintln!("  [system message: {} tokens {how} in {:.0} ms{note}]", v["tokens"], v["ms"].as_f64().unwrap_or(0.0));
+                }
+                _ => {
+                    if let Some(e) = v["error"].as_str() {
+                        eprintln!("  [system message not prepared ahead: {e}]");
+                    }
+                }
+            },
             "symbolic_check" => {
                 eprintln!("{}    x symbolic check: {}", indent(node, &depth_of), v["message"].as_str().unwrap_or(""));
             }
@@ -271,8 +283,10 @@ fn request(
 }
 
 /// The engine, with the grammar compiler's free-text slice (subgoals and reasons are free text).
-fn load_engine(path: &Path) -> anyhow::Result<Engine> {
-    Ok(Engine::load_with_slices(path, &[crate::grammar::TEXT_SLICE.to_string()])?)
+fn load_engine(path: &Path, inference: &InferenceArgs) -> anyhow::Result<Engine> {
+    let mut engine = Engine::load_with_slices(path, &[crate::grammar::TEXT_SLICE.to_string()])?;
+    engine.set_prefix_dir(inference.prefix_dir());
+    Ok(engine)
 }
 
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
@@ -283,7 +297,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let req = request(args.instruction.as_deref(), args.context.clone(), &world, task.as_ref(), args.oracle_stop)?;
     let mut env = make_env(&args.env, world, req.focus.clone())?;
     let path = resolve_model(&args.model)?;
-    let mut engine = load_engine(&path)?;
+    let mut engine = load_engine(&path, &args.inference)?;
     let mut trace = match &args.trace {
         Some(p) => TraceWriter::create(p).with_context(|| format!("creating trace file {}", p.display()))?,
         None => TraceWriter::sink(),
@@ -331,6 +345,7 @@ fn report(
                 "replans": s.replans, "failed_executions": s.failed_executions,
                 "symbolic_rejections": s.symbolic_rejections, "abandoned": s.abandoned, "actions": s.actions,
                 "wall_ms": s.wall_ms, "call_ms_p50": percentile(&node_ms, 0.5), "call_ms_p99": percentile(&node_ms, 0.99),
+                "prefix": s.warm,
             },
             "tree": out.tree.to_json(),
         });
@@ -419,7 +434,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     if args.model.is_none() && fp != meta["model"] {
         eprintln!("warning: the model file changed since the trace was written ({} vs {})", fp, meta["model"]);
     }
-    let mut engine = load_engine(&model)?;
+    let mut engine = load_engine(&model, &args.inference)?;
     let out = plan(&mut engine, env.as_mut(), &req, &cfg, &mut TraceWriter::sink());
     let diffs = compare(&recorded, &out);
     if diffs.is_empty() {

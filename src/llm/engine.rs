@@ -147,6 +147,33 @@ pub struct Scoring {
     pub ms: f64,
 }
 
+/// Where a prompt's constant beginning came from when [`Generate::warm`] put it in the cache.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarmSource {
+    /// Nothing done: this model keeps no cache, or no snapshot directory is set.
+    #[default]
+    None,
+    /// Already in the cache (an earlier call of this process).
+    Cached,
+    /// Read from a snapshot on disk.
+    Loaded,
+    /// Computed, and written to a snapshot for the next start.
+    Computed,
+}
+
+/// What [`Generate::warm`] did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Warm {
+    pub tokens: usize,
+    pub source: WarmSource,
+    pub ms: f64,
+    /// The snapshot file read or written.
+    pub snapshot: Option<PathBuf>,
+    /// Why a snapshot could not be read or written (the run goes on: it only costs time).
+    pub note: Option<String>,
+}
+
 /// The calls the planner makes of a model: generate under a grammar, or rank a closed list of
 /// continuations by likelihood (a choice among known options, exact by construction).
 pub trait Generate {
@@ -156,6 +183,13 @@ pub trait Generate {
     fn score(&mut self, prompt: &Prompt, continuations: &[String]) -> Result<Scoring> {
         let _ = (prompt, continuations);
         Err(LlmError::Decode("this model cannot score continuations; choose by generation".into()))
+    }
+
+    /// Puts `prefix` in the cache ahead of the calls that start with it: the messages, rendered up
+    /// to where the text of a following user turn begins. A model without a cache does nothing.
+    fn warm(&mut self, prefix: &[Message]) -> Result<Warm> {
+        let _ = prefix;
+        Ok(Warm::default())
     }
 }
 
@@ -168,6 +202,8 @@ pub struct Engine {
     grammars: GrammarCompiler,
     /// The tokens whose keys/values are in the model's cache, in order.
     cached: Vec<u32>,
+    /// Where [`Generate::warm`] keeps prefix snapshots (none: it does nothing).
+    prefix_dir: Option<PathBuf>,
     load_ms: f64,
 }
 
@@ -205,6 +241,7 @@ impl Engine {
             template,
             grammars,
             cached: Vec::new(),
+            prefix_dir: None,
             load_ms: t0.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -240,6 +277,28 @@ impl Engine {
                     self.path.display()
                 ))),
             },
+        }
+    }
+
+    /// Keeps prompt-prefix snapshots in `dir` ([`super::prefix`]), read and written by
+    /// [`Generate::warm`]; `None` (the default) turns them off.
+    pub fn set_prefix_dir(&mut self, dir: Option<PathBuf>) {
+        self.prefix_dir = dir;
+    }
+
+    /// `messages` rendered up to where the text of a following user turn begins: the part of every
+    /// prompt that starts with these messages which the template writes the same.
+    pub fn render_prefix(&self, messages: &[Message]) -> Result<String> {
+        const MARK: &str = "\u{1}step: the prefix ends here\u{1}";
+        let mut m = messages.to_vec();
+        m.push(Message::user(MARK));
+        let text = self.render(&Prompt::Chat(m))?;
+        match text.find(MARK) {
+            Some(i) => Ok(text[..i].to_string()),
+            None => Err(LlmError::Template(format!(
+                "{}: the chat template does not write a user message's text as given, so no prompt prefix can be cut",
+                self.path.display()
+            ))),
         }
     }
 
@@ -279,6 +338,46 @@ impl Engine {
 impl Generate for Engine {
     fn generate(&mut self, prompt: &Prompt, grammar: Option<&str>, opts: &GenOptions) -> Result<Generation> {
         self.generate_streaming(prompt, grammar, opts, None)
+    }
+
+    /// With a snapshot directory set: reads the prefix's keys and values from its snapshot, or
+    /// computes them and writes the snapshot. Without one, the first call computes the prefix as
+    /// before.
+    fn warm(&mut self, prefix: &[Message]) -> Result<Warm> {
+        let t0 = Instant::now();
+        let ids = self.tokenizer.encode(&self.render_prefix(prefix)?)?;
+        let mut warm = Warm { tokens: ids.len(), ..Warm::default() };
+        if ids.is_empty() {
+            return Ok(warm);
+        }
+        let context = self.model.config().context_length;
+        if ids.len() >= context {
+            return Err(LlmError::PromptTooLong { prompt_tokens: ids.len(), context });
+        }
+        if common_prefix(&self.cached, &ids) == ids.len() {
+            warm.source = WarmSource::Cached;
+        } else if let Some(dir) = self.prefix_dir.clone() {
+            let path = dir.join(format!("{}.kv", super::prefix::key(&self.path, &ids)));
+            self.cached.clear();
+            match super::prefix::load(&mut self.model, &path, &ids) {
+                Ok(true) => {
+                    self.cached = ids;
+                    warm.source = WarmSource::Loaded;
+                }
+                found => {
+                    warm.note = found.err();
+                    self.model.truncate(0);
+                    self.forward(&ids)?;
+                    if let Err(e) = super::prefix::save(&self.model, &path, &ids) {
+                        warm.note = Some(format!("cannot write the prefix snapshot {}: {e}", path.display()));
+                    }
+                    warm.source = WarmSource::Computed;
+                }
+            }
+            warm.snapshot = Some(path);
+        }
+        warm.ms = ms(t0);
+        Ok(warm)
     }
 
     /// Runs the prompt once (reusing the cached prefix), then each continuation after it. The

@@ -272,6 +272,30 @@ impl Transformer {
         self.layers.first().map_or(0, |l| l.cache.len)
     }
 
+    /// The keys and values of the first `n` cached positions, layer by layer (keys, then values),
+    /// each `n × n_head_kv × head_dim` floats: what a prefix snapshot stores ([`super::prefix`]).
+    pub fn cache_slices(&self, n: usize) -> Vec<&[f32]> {
+        let w = self.cfg.n_head_kv * self.cfg.head_dim;
+        let n = n.min(self.cached_len());
+        self.layers.iter().flat_map(|l| [&l.cache.k[..n * w], &l.cache.v[..n * w]]).collect()
+    }
+
+    /// Replaces the cache by `n` positions that `fill` writes, slice by slice in the order of
+    /// [`Transformer::cache_slices`]. On an error the cache is left empty.
+    pub fn restore_cache<E>(&mut self, n: usize, mut fill: impl FnMut(&mut [f32]) -> std::result::Result<(), E>) -> std::result::Result<(), E> {
+        let w = self.cfg.n_head_kv * self.cfg.head_dim;
+        self.truncate(0);
+        for l in &mut self.layers {
+            l.cache.reserve(n, w);
+            fill(&mut l.cache.k[..n * w])?;
+            fill(&mut l.cache.v[..n * w])?;
+        }
+        for l in &mut self.layers {
+            l.cache.len = n;
+        }
+        Ok(())
+    }
+
     /// Forgets every cached position from `len` on (prefix reuse: keep the shared part).
     pub fn truncate(&mut self, len: usize) {
         for l in &mut self.layers {

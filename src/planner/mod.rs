@@ -490,6 +490,9 @@ pub struct PlanStats {
     pub actions: usize,
     pub wall_ms: f64,
     pub calls: Vec<CallRecord>,
+    /// How the prompts' shared beginning got into the model's cache before the first call (none:
+    /// the first call computed it, or no model ran).
+    pub warm: Option<crate::llm::engine::Warm>,
 }
 
 impl PlanStats {

@@ -28,7 +28,7 @@ use super::tree::{NodeId, Status, SubgoalTree};
 use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
 use crate::action::Action;
 use crate::grammar::{ActionSet, Proposal, Verdict};
-use crate::llm::engine::{Generate, Prompt, StopReason};
+use crate::llm::engine::{Generate, Prompt, StopReason, WarmSource};
 use crate::llm::LlmError;
 use crate::world::{Fact, World};
 
@@ -178,6 +178,7 @@ pub(crate) fn run_tree(
     run.node_event(0);
     let root = run.tree.root();
     run.infer_goals();
+    run.warm();
     run.set_status(root, Status::Decomposing, "the instruction");
     let stop = match run.expand(root, None) {
         Ok(End::Complete) => {
@@ -225,6 +226,24 @@ impl Run<'_> {
         self.goals = Goals::inferred(candidates);
         self.prompter = self.prompter.clone().setting_goals();
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
+    }
+
+    /// Puts the prompts' shared beginning in the model's cache before the first call (read from
+    /// its snapshot where one is kept; see `llm::prefix`), so the first node costs what the others
+    /// do. Its time is reported on its own (`warm` event). A failure here is not the run's: the
+    /// first call computes the prefix, or meets the same error and handles it as calls do.
+    fn warm(&mut self) {
+        if self.cfg.kind == PlannerKind::Random {
+            return;
+        }
+        match self.model.warm(&self.prompter.prefix()) {
+            Ok(w) if w.source == WarmSource::None => {}
+            Ok(w) => {
+                self.trace.event("warm", json!(w));
+                self.stats.warm = Some(w);
+            }
+            Err(e) => self.trace.event("warm", json!({"error": e.to_string()})),
+        }
     }
 
     fn node_event(&mut self, id: NodeId) {

@@ -81,6 +81,12 @@ impl Prompter {
         self
     }
 
+    /// The beginning every prompt of the run shares: the system message (the engine cuts it where
+    /// the user turn's text begins, and may keep it on disk between runs).
+    pub fn prefix(&self) -> Vec<Message> {
+        vec![Message::system(self.system.clone())]
+    }
+
     fn node_text(&self, v: &NodeView) -> String {
         let mut s = self.task.clone();
         s.push_str("State:\n");

@@ -655,6 +655,16 @@ impl SendPtr {
 }
 
 /// The kernel chosen for this process (detected once).
+/// What on this CPU decides the bits of a forward pass: the kernel path, and the features the C
+/// library's `expf` picks its variant by. Prefix snapshots are keyed by it.
+pub(crate) fn cpu_signature() -> String {
+    #[cfg(target_arch = "x86_64")]
+    let features = format!("fma={} avx512f={}", is_x86_feature_detected!("fma"), is_x86_feature_detected!("avx512f"));
+    #[cfg(not(target_arch = "x86_64"))]
+    let features = String::new();
+    format!("{:?} {} {features}", kernel(), std::env::consts::ARCH)
+}
+
 pub(crate) fn kernel() -> Kernel {
     static K: std::sync::OnceLock<Kernel> = std::sync::OnceLock::new();
     *K.get_or_init(Kernel::detect)
