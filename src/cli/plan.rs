@@ -185,9 +185,16 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             }
             "warm" => match v["source"].as_str() {
                 Some(source) if source != "cached" => {
-                    let how = if source == "loaded" { "read from its snapshot" } else { "computed, snapshot written" };
+                    let ms = v["ms"].as_f64().unwrap_or(0.0);
+                    let how = if source == "loaded" {
+                        format!("read from its snapshot in {ms:.0} ms")
+                    } else if v["note"].is_null() {
+                        format!("computed in {ms:.0} ms, kept for the next run")
+                    } else {
+                        format!("computed in {ms:.0} ms")
+                    };
                     let note = v["note"].as_str().map(|n| format!(" ({n})")).unwrap_or_default();
-                    eprintln!("  [system message: {} tokens {how} in {:.0} ms{note}]", v["tokens"], v["ms"].as_f64().unwrap_or(0.0));
+                    eprintln!("  [system message: {} tokens {how}{note}]", v["tokens"]);
                 }
                 _ => {
                     if let Some(e) = v["error"].as_str() {
