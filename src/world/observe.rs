@@ -1,8 +1,9 @@
 //! Observations for the planner: a compact, deterministic text view of the state, bounded in size.
 //!
-//! The view names where the robot is, what it holds and what it is close to, then one line per
-//! task-relevant object (its states, what it is on or in, what is on or in it, whether the robot is
-//! close). A byte budget truncates it at a line boundary with a marker saying how much was left out.
+//! The view has one line per task-relevant object (its states, what it is on or in, what is on or
+//! in it), then where the robot is, what it holds and what it is close to: the line that changes
+//! most often comes last, so a planner's prompt cache keeps the lines above it. A byte budget
+//! truncates the object lines at a line boundary with a marker saying how many were left out.
 //! The object catalogue (class, id, properties, states) is what grammar building needs.
 
 use std::fmt::Write;
@@ -27,9 +28,9 @@ pub struct ObjectInfo {
 const LIST_MAX: usize = 6;
 
 impl World {
-    /// The state as the planner sees it: the robot, then the objects in `relevant` (ascending id;
-    /// unknown ids are skipped), in at most `budget` bytes. A truncated view ends with a line
-    /// `… (N more objects not shown)`.
+    /// The state as the planner sees it: the objects in `relevant` (ascending id; unknown ids are
+    /// skipped), then the robot, in at most `budget` bytes (the robot's line is always shown). Cut
+    /// object lines are counted in a line `… (N more lines not shown)`.
     pub fn observe(&self, relevant: &[u32], budget: usize) -> String {
         let c = self.char_ix();
         let mut ids: Vec<u32> = relevant.iter().copied().filter(|&id| id != self.character()).collect();
@@ -84,12 +85,22 @@ impl World {
         if !facing.is_empty() {
             let _ = write!(robot, "; facing {}", facing.join(", "));
         }
-        lines.push(robot);
-
+        // The robot's line comes last: it changes with nearly every action, and a planner's prompt
+        // cache is kept only up to the first changed character, so the lines that stay put go first.
         for &ix in &rel_ix {
             lines.push(self.object_line(ix));
         }
-        bounded(lines, budget)
+        let n = lines.len();
+        let mut out = bounded(lines, budget.saturating_sub(robot.len() + 1));
+        if out.is_empty() && n > 0 {
+            // No room for any object line: still say that there are some.
+            out = format!("… ({n} more lines not shown)");
+        }
+        if !out.is_empty() && !out.ends_with('\n') {
+            out.push('\n');
+        }
+        out.push_str(&robot);
+        out
     }
 
     fn object_line(&self, ix: Ix) -> String {
@@ -121,9 +132,6 @@ impl World {
             if !xs.is_empty() {
                 parts.push(format!("{word} {}", list(self, &xs)));
             }
-        }
-        if self.is_close(ix) {
-            parts.push("robot is close".into());
         }
         if !parts.is_empty() {
             let _ = write!(l, "; {}", parts.join("; "));
@@ -280,18 +288,20 @@ mod tests {
         let o = w.observe(&[12, 10], 10_000);
         assert_eq!(
             o,
-            "robot: in <kitchen> (1); hands empty; close to no task object\n\
-             <fridge> (10): CLOSED OFF CLEAN PLUGGED_IN; in <kitchen> (1)\n\
-             <apple> (12): CLEAN; on <kitchencounter> (11); in <kitchen> (1)"
+            "<fridge> (10): CLOSED OFF CLEAN PLUGGED_IN; in <kitchen> (1)\n\
+             <apple> (12): CLEAN; on <kitchencounter> (11); in <kitchen> (1)\n\
+             robot: in <kitchen> (1); hands empty; close to no task object"
         );
         w.execute(&a(Verb::Walk, &[("apple", 12)])).unwrap();
+        let walked = w.observe(&[12, 10, 11], 10_000);
         w.execute(&a(Verb::Grab, &[("apple", 12)])).unwrap();
         let o = w.observe(&[12, 10, 11], 10_000);
-        assert!(o.starts_with("robot: in <kitchen> (1); holding <apple> (12) (right hand); close to <kitchencounter> (11), <apple> (12)"), "{o}");
-        assert!(
-            o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1); robot is close"),
-            "{o}"
-        );
+        assert!(o.ends_with("\nrobot: in <kitchen> (1); holding <apple> (12) (right hand); close to <kitchencounter> (11), <apple> (12)"), "{o}");
+        assert!(o.contains("<apple> (12): CLEAN; held by the robot (right hand); in <kitchen> (1)\n"), "{o}");
+        // A walk changes the robot's line only, the last one (what the prompt cache keeps depends on it).
+        let before = World::demo().observe(&[12, 10, 11], 10_000);
+        let (b, a_) = (before.rsplit_once('\n').unwrap().0, walked.rsplit_once('\n').unwrap().0);
+        assert_eq!(b, a_);
         assert!(o.contains("<kitchencounter> (11): CLEAN; in <kitchen> (1); has on it <milk> (13), <bread> (14), <microwave> (15), <knife> (24), <rag> (26)"), "{o}");
         assert_eq!(o, w.observe(&[11, 10, 12, 12], 10_000), "order and duplicates do not matter");
     }
@@ -301,14 +311,18 @@ mod tests {
         let w = World::demo();
         let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
         let full = w.observe(&all, usize::MAX);
-        for budget in [60, 200, 500] {
+        let robot = full.lines().last().unwrap();
+        assert!(robot.starts_with("robot: "), "{full}");
+        for budget in [20, 200, 500] {
             let o = w.observe(&all, budget);
-            assert!(o.len() <= budget, "{} > {budget}", o.len());
-            assert!(o.ends_with("more lines not shown)"), "{o}");
+            assert!(o.len() <= budget.max(robot.len() + 40), "{} > {budget}", o.len());
+            // The robot's line is always shown, last; the objects' lines are cut, with a marker.
             let shown: Vec<&str> = o.lines().collect();
-            let (marker, kept) = shown.split_last().unwrap();
+            let (last, rest) = shown.split_last().unwrap();
+            assert_eq!(last, &robot);
+            let (marker, kept) = rest.split_last().unwrap();
             assert!(full.starts_with(&kept.iter().map(|l| format!("{l}\n")).collect::<String>()));
-            let left = full.lines().count() - kept.len();
+            let left = full.lines().count() - 1 - kept.len();
             assert_eq!(*marker, format!("… ({left} more lines not shown)"));
         }
         assert!(!full.contains("not shown"));
