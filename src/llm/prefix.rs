@@ -28,6 +28,8 @@ const MAGIC: &[u8; 8] = b"STEPKV1\n";
 /// Snapshots kept in one directory: a rebuilt program or another model writes a new one (SmolLM2's
 /// system message is ~70 MB of keys and values), and the oldest beyond this many are deleted.
 pub const KEEP: usize = 4;
+/// The longest header read: a token list the length of any model's context, written as JSON.
+const MAX_HEADER: usize = 16 << 20;
 
 /// Where snapshots go when nothing is said: `$STEP_PREFIX_CACHE`, else `$XDG_CACHE_HOME/step/prefix`,
 /// else `$HOME/.cache/step/prefix`.
@@ -87,7 +89,12 @@ pub fn load(model: &mut Transformer, path: &Path, tokens: &[u32]) -> Result<bool
     }
     let mut len = [0u8; 4];
     r.read_exact(&mut len).map_err(|e| bad(&e.to_string()))?;
-    let mut json = vec![0u8; u32::from_le_bytes(len) as usize];
+    let len = u32::from_le_bytes(len) as usize;
+    // The header lists the tokens (a few KB); a damaged length must not become a huge allocation.
+    if len > MAX_HEADER {
+        return Err(bad(&format!("a header of {len} bytes")));
+    }
+    let mut json = vec![0u8; len];
     r.read_exact(&mut json).map_err(|e| bad(&e.to_string()))?;
     let header: Header = serde_json::from_slice(&json).map_err(|e| bad(&format!("header: {e}")))?;
     let cfg = model.config();
@@ -200,6 +207,22 @@ mod tests {
         want.push("notes.kv".into());
         want.sort();
         assert_eq!(left, want);
+    }
+
+    #[test]
+    fn a_damaged_header_length_is_a_miss_not_an_allocation() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(format!("{:064x}.kv", 1));
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend_from_slice(&u32::MAX.to_le_bytes());
+        fs::write(&path, &bytes).unwrap();
+        let spec = crate::llm::tiny::TinySpec::llama();
+        let gguf = dir.path().join("tiny.gguf");
+        crate::llm::tiny::write_tiny_gguf(&spec, &gguf).unwrap();
+        let mut model = Transformer::load(&crate::llm::gguf::GgufFile::open(&gguf).unwrap()).unwrap();
+        let err = load(&mut model, &path, &[1, 2, 3]).unwrap_err();
+        assert!(err.contains("a header of 4294967295 bytes"), "{err}");
+        assert_eq!(model.cached_len(), 0);
     }
 
     #[test]
