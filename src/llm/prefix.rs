@@ -26,7 +26,7 @@ use super::model::Transformer;
 
 const MAGIC: &[u8; 8] = b"STEPKV1\n";
 /// Snapshots kept in one directory: a rebuilt program or another model writes a new one (SmolLM2's
-/// system message is ~70 MB of keys and values), and the oldest beyond this many are deleted.
+/// system message is 81 MB of keys and values), and the oldest beyond this many are deleted.
 pub const KEEP: usize = 4;
 /// The longest header read: a token list the length of any model's context, written as JSON.
 const MAX_HEADER: usize = 16 << 20;
@@ -45,6 +45,14 @@ struct Header {
     tokens: Vec<u32>,
     layers: usize,
     width: usize,
+}
+
+impl Header {
+    /// The header of `tokens`' snapshot for `model`'s shape.
+    fn of(model: &Transformer, tokens: &[u32]) -> Header {
+        let cfg = model.config();
+        Header { tokens: tokens.to_vec(), layers: cfg.n_layer, width: cfg.n_head_kv * cfg.head_dim }
+    }
 }
 
 /// The snapshot's file name for `tokens` of `model` (a file path): a hash of the program's build
@@ -97,9 +105,7 @@ pub fn load(model: &mut Transformer, path: &Path, tokens: &[u32]) -> Result<bool
     let mut json = vec![0u8; len];
     r.read_exact(&mut json).map_err(|e| bad(&e.to_string()))?;
     let header: Header = serde_json::from_slice(&json).map_err(|e| bad(&format!("header: {e}")))?;
-    let cfg = model.config();
-    let want = Header { tokens: tokens.to_vec(), layers: cfg.n_layer, width: cfg.n_head_kv * cfg.head_dim };
-    if header != want {
+    if header != Header::of(model, tokens) {
         return Err(bad("it holds other tokens or another model's shape"));
     }
     let mut hash = Sha256::new();
@@ -134,9 +140,7 @@ pub fn save(model: &Transformer, path: &Path, tokens: &[u32]) -> std::io::Result
     let tmp = path.with_extension(format!("tmp{}", std::process::id()));
     let written = (|| {
         let mut w = BufWriter::with_capacity(1 << 20, File::create(&tmp)?);
-        let cfg = model.config();
-        let header = Header { tokens: tokens.to_vec(), layers: cfg.n_layer, width: cfg.n_head_kv * cfg.head_dim };
-        let json = serde_json::to_vec(&header)?;
+        let json = serde_json::to_vec(&Header::of(model, tokens))?;
         w.write_all(MAGIC)?;
         w.write_all(&(json.len() as u32).to_le_bytes())?;
         w.write_all(&json)?;

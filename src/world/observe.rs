@@ -94,7 +94,7 @@ impl World {
         let mut out = bounded(lines, budget.saturating_sub(robot.len() + 1));
         if out.is_empty() && n > 0 {
             // No room for any object line: still say that there are some.
-            out = format!("… ({n} more lines not shown)");
+            out = cut_marker(n);
         }
         if !out.is_empty() && !out.ends_with('\n') {
             out.push('\n');
@@ -230,6 +230,11 @@ fn list(w: &World, xs: &[Ix]) -> String {
     names.join(", ")
 }
 
+/// The line that stands for `n` lines left out of a bounded view.
+fn cut_marker(n: usize) -> String {
+    format!("… ({n} more lines not shown)")
+}
+
 /// Joins lines with `\n` while they fit in `budget` bytes, keeping room for the truncation marker.
 fn bounded(lines: Vec<String>, budget: usize) -> String {
     let total: usize = lines.iter().map(|l| l.len() + 1).sum();
@@ -239,7 +244,7 @@ fn bounded(lines: Vec<String>, budget: usize) -> String {
     let mut out = String::new();
     for (i, l) in lines.iter().enumerate() {
         let left = lines.len() - i;
-        let marker = format!("… ({left} more lines not shown)");
+        let marker = cut_marker(left);
         // Keep room for this line, a newline, and the marker that may follow it.
         if out.len() + l.len() + 1 + marker.len() + 1 > budget {
             if out.len() + marker.len() <= budget {

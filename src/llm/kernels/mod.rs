@@ -654,7 +654,6 @@ impl SendPtr {
     }
 }
 
-/// The kernel chosen for this process (detected once).
 /// What on this CPU decides the bits of a forward pass: the kernel path, and the features the C
 /// library's `expf` picks its variant by. Prefix snapshots are keyed by it.
 pub(crate) fn cpu_signature() -> String {
@@ -665,6 +664,7 @@ pub(crate) fn cpu_signature() -> String {
     format!("{:?} {} {features}", kernel(), std::env::consts::ARCH)
 }
 
+/// The kernel chosen for this process (detected once).
 pub(crate) fn kernel() -> Kernel {
     static K: std::sync::OnceLock<Kernel> = std::sync::OnceLock::new();
     *K.get_or_init(Kernel::detect)
