@@ -391,3 +391,35 @@ fn an_unwritable_prefix_directory_costs_time_not_the_run() {
     let g = e.generate(&p, None, &GenOptions { max_tokens: 4, ..Default::default() }).unwrap();
     assert!(g.reused_tokens > 0);
 }
+
+/// A task read ahead of the first call (`Generate::read`) is in memory only, the call then
+/// computes just its own tail, and the numbers are those of reading nothing ahead.
+#[test]
+fn reading_a_task_ahead_changes_what_the_call_computes_not_its_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    for spec in [TinySpec::llama(), TinySpec::qwen2().with_seed(5)] {
+        let path = tiny(spec, &dir);
+        let system = vec![Message::system("You plan for a household robot, one step at a time.")];
+        let task = "Task: put the apple in the fridge\nObjects: apple (12), fridge (10), kitchen (1)\n";
+        let prompt = Prompt::Chat(vec![system[0].clone(), Message::user(format!("{task}State:\napple is ON table\nNext step?"))]);
+        let conts = ["action:".to_string(), "done".to_string()];
+        let want = Engine::load(&path).unwrap().score(&prompt, &conts).unwrap();
+
+        let mut e = Engine::load(&path).unwrap();
+        let r = e.read(&system, task).unwrap();
+        assert_eq!(r.source, WarmSource::Computed);
+        assert!(r.snapshot.is_none(), "a task is never kept on disk: {r:?}");
+        let whole = e.tokenizer().encode(&e.render(&prompt).unwrap()).unwrap().len();
+        let got = e.score(&prompt, &conts).unwrap();
+        assert_eq!(got.scores, want.scores);
+        // Everything read is reused (but a last token the prompt's next text may tokenize with).
+        assert!(got.reused_tokens + 1 >= r.tokens && got.reused_tokens < whole, "{r:?}, {got:?}, {whole}");
+        // Read again: nothing left to compute.
+        let again = e.read(&system, task).unwrap();
+        assert_eq!((again.source, again.tokens), (WarmSource::Cached, 0));
+        // Another task after the same system message keeps the system message's tokens.
+        let other = e.read(&system, "Task: wash the plate\n").unwrap();
+        assert_eq!(other.source, WarmSource::Computed);
+        assert!(other.tokens < r.tokens, "{other:?} after {r:?}");
+    }
+}

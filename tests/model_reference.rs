@@ -93,7 +93,9 @@ fn check_against_reference(file: &str, arch: Arch) {
     eprintln!("{file}: nmse {e:.2e}, max diff {:.4} of the largest logit", max_rel_diff(&ours, &theirs));
     assert!(e < 2e-3, "{file}: logits differ from the reference: normalised squared error {e}");
     assert_eq!(argmax(&ours), argmax(&theirs));
-    // Greedy continuation of a text, each side fed its own choices: the same tokens throughout.
+    // Greedy continuation of a text, both sides fed the reference's choice at each step (so a
+    // near tie does not end the comparison): our choice must be the reference's at every step but
+    // a few near ties.
     let g = GgufFile::open(&path).unwrap();
     let text = "Robots in a kitchen: to put the apple in the fridge, first walk to the apple, then grab it, \
                 then walk to the fridge, open it, put the apple inside and close the fridge. To wash a plate,";
@@ -101,23 +103,23 @@ fn check_against_reference(file: &str, arch: Arch) {
     m.truncate(0);
     let mut r = Reference::load(&path, arch);
     let (mut lo, mut lr) = (m.forward(&ids).unwrap(), r.forward(&ids, 0));
+    let mut ties = 0;
     for step in 0..32 {
         let (a, b) = (argmax(&lo).unwrap(), argmax(&lr).unwrap());
         if a != b {
             // Allowed only at a near tie, where 8-bit rounding may pick either: the reference must
-            // rate our choice within the noise measured above (1% of its largest logit), and the
-            // sequences part there.
+            // rate our choice within the noise measured above (1% of its largest logit).
             let top = lr.iter().fold(0f32, |x, y| x.max(y.abs()));
             let gap = lr[b as usize] - lr[a as usize];
-            eprintln!("{file}: greedy continuations part at step {step} at a near tie ({gap} of {top})");
-            assert!(gap < 0.01 * top, "{file}: greedy continuations part at step {step}: {a} vs {b}, gap {gap}");
-            assert!(step >= 4, "{file}: greedy continuations part already at step {step}");
-            return;
+            eprintln!("{file}: greedy choices differ at step {step} at a near tie ({gap} of {top})");
+            assert!(gap < 0.01 * top, "{file}: greedy choices differ at step {step}: {a} vs {b}, gap {gap}");
+            ties += 1;
         }
         let pos = ids.len() + step;
-        lo = m.forward(&[a]).unwrap();
+        lo = m.forward(&[b]).unwrap();
         lr = r.forward(&[b], pos);
     }
+    assert!(ties <= 3, "{file}: greedy choices differ at {ties} of 32 steps");
 }
 
 #[test]

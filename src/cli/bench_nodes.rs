@@ -1,6 +1,7 @@
 //! `step bench nodes`: the cost of one tree node. Runs a planner over tasks and reports, per LLM role
 //! (decomposition, termination, flat), latency p50/p99, tokens in (new and reused) and out, and the
-//! share of prefill, decode and mask time; per tree node, the p50/p99 of all its calls together.
+//! share of prefill, decode and mask time; per tree node, the p50/p99 of all its calls together;
+//! and, apart, reading each task into the cache before its first node.
 //! A table on stderr, JSON on stdout.
 
 use std::collections::BTreeMap;
@@ -88,6 +89,25 @@ fn group(calls: &[&CallRecord]) -> Group {
     }
 }
 
+/// Reading each task into the cache before its first node: a prefill of its own tokens.
+fn reads_group(reads: &[Warm]) -> Group {
+    let n = reads.len();
+    if n == 0 {
+        return Group::default();
+    }
+    let mut ms: Vec<f64> = reads.iter().map(|r| r.ms).collect();
+    ms.sort_by(f64::total_cmp);
+    Group {
+        count: n,
+        p50_ms: plans::percentile(&ms, 50.0).unwrap_or(0.0),
+        p99_ms: plans::percentile(&ms, 99.0).unwrap_or(0.0),
+        mean_ms: ms.iter().sum::<f64>() / n as f64,
+        tokens_in_new: reads.iter().map(|r| r.tokens as f64).sum::<f64>() / n as f64,
+        prefill_share: 1.0,
+        ..Group::default()
+    }
+}
+
 #[derive(Serialize)]
 struct NodesReport {
     model: String,
@@ -97,6 +117,9 @@ struct NodesReport {
     by_role: BTreeMap<String, Group>,
     /// Every call of a tree node together (a node is decomposed and judged).
     per_node: Group,
+    /// Each task and its context read into the cache before its first node (not in the node
+    /// figures: a task is read once, however many nodes follow).
+    task_read: Group,
     /// Before the first node: loading the model, and the system message put in its cache (read
     /// from its snapshot, or computed); not in the node figures.
     model_load_ms: f64,
@@ -120,6 +143,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     // Every call, with the task it came from (node ids restart at each task).
     let mut calls: Vec<(usize, CallRecord)> = Vec::new();
     let mut prefix = None;
+    let mut reads: Vec<Warm> = Vec::new();
     let n_tasks;
     if let Some(instr) = &a.instruction {
         let w = crate::world::World::demo();
@@ -130,6 +154,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let out = crate::planner::plan(&mut engine, &mut env, &req, &main_job, &mut TraceWriter::sink());
         calls.extend(out.stats.calls.into_iter().map(|c| (0, c)));
         prefix = out.stats.warm;
+        reads.extend(out.stats.read);
         n_tasks = 1;
     } else {
         let source = a.tasks.source();
@@ -141,6 +166,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
             eprintln!("[{}/{}] {} ({})", i + 1, tasks.len(), t.id, t.title);
             let (_, stats) = plans::run_task_stats(&mut engine, t, &cfg);
             prefix = prefix.or(stats.warm);
+            reads.extend(stats.read);
             calls.extend(stats.calls.into_iter().map(|c| (i, c)));
         }
     }
@@ -149,12 +175,15 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         roles.entry(c.role.to_string()).or_default().push(c);
     }
     let by_role: BTreeMap<String, Group> = roles.iter().map(|(k, v)| (k.clone(), group(v))).collect();
-    // Per node: a proposed child's decomposition call merged with the calls that judged or scored
-    // it (merging by the calls' node would charge a parent with all its children's proposals).
+    // Per node: the decision that proposed it, its calls merged (see `CallRecord::starts_decision`;
+    // merging by the calls' node would charge a parent with all its children's proposals).
     let mut merged: Vec<(usize, CallRecord)> = Vec::new();
+    let mut last_role = "";
     for (t, c) in &calls {
+        let previous = merged.last().filter(|(task, _)| task == t).map(|_| last_role);
+        last_role = c.role;
         match merged.last_mut() {
-            Some((task, m)) if *task == *t && c.role != "decompose" && c.role != "flat" => {
+            Some((task, m)) if *task == *t && !c.starts_decision(previous) => {
                 m.prompt_tokens += c.prompt_tokens;
                 m.reused_tokens += c.reused_tokens;
                 m.output_tokens += c.output_tokens;
@@ -174,6 +203,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         tasks: n_tasks,
         by_role,
         per_node: group(&node_refs),
+        task_read: reads_group(&reads),
         model_load_ms: engine.load_ms(),
         prefix,
         wall_s: t0.elapsed().as_secs_f64(),
@@ -182,8 +212,11 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         "{:<12} {:>6} {:>9} {:>9} {:>8} {:>8} {:>7} {:>8} {:>7} {:>6}",
         "role", "calls", "p50 ms", "p99 ms", "in new", "reused", "out", "prefill", "decode", "mask"
     );
-    let rows =
-        report.by_role.iter().map(|(k, g)| (k.as_str(), g)).chain(std::iter::once(("per node", &report.per_node)));
+    let rows = report
+        .by_role
+        .iter()
+        .map(|(k, g)| (k.as_str(), g))
+        .chain([("per node", &report.per_node), ("task read", &report.task_read)]);
     for (name, g) in rows {
         eprintln!(
             "{:<12} {:>6} {:>9.1} {:>9.1} {:>8.1} {:>8.1} {:>7.1} {:>7.0}% {:>6.0}% {:>5.0}%",

@@ -202,6 +202,10 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
                     }
                 }
             },
+            "read" => match v["error"].as_str() {
+                Some(e) => eprintln!("  [task not read ahead: {e}]"),
+                None => eprintln!("  [task: {} tokens read in {:.0} ms]", v["tokens"], v["ms"].as_f64().unwrap_or(0.0)),
+            },
             "symbolic_check" => {
                 eprintln!("{}    x symbolic check: {}", indent(node, &depth_of), v["message"].as_str().unwrap_or(""));
             }
@@ -352,7 +356,7 @@ fn report(
                 "replans": s.replans, "failed_executions": s.failed_executions,
                 "symbolic_rejections": s.symbolic_rejections, "abandoned": s.abandoned, "actions": s.actions,
                 "wall_ms": s.wall_ms, "call_ms_p50": percentile(&node_ms, 0.5), "call_ms_p99": percentile(&node_ms, 0.99),
-                "prefix": s.warm,
+                "prefix": s.warm, "task_read": s.read,
             },
             "tree": out.tree.to_json(),
         });

@@ -98,6 +98,10 @@ pub struct TaskPlanReport {
     pub grammar_errors: usize,
     /// Per tree node: the sum of its LLM calls' milliseconds.
     pub node_ms: Vec<f64>,
+    /// Reading the task and its context into the model's cache, before the first node (none: the
+    /// first call read it, or no model ran).
+    pub read_ms: Option<f64>,
+    pub read_tokens: Option<usize>,
     pub wall_ms: f64,
     /// Closed loop: the state the planner's world ended in equals the scorer's replay of the plan.
     pub replay_agrees: bool,
@@ -172,14 +176,16 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         }
         _ => true,
     };
-    // A tree node's latency: the decomposition call that proposed it plus the calls that judged or
-    // scored it (grouping by the calls' node would charge a parent with all its children's calls).
+    // A tree node's latency: the decision that proposed it, its calls in order (grouping by the
+    // calls' node would charge a parent with all its children's calls).
     let mut node_ms: Vec<f64> = Vec::new();
+    let mut previous = None;
     for c in &out.stats.calls {
         match node_ms.last_mut() {
-            Some(t) if c.role != "decompose" && c.role != "flat" => *t += c.total_ms,
+            Some(t) if !c.starts_decision(previous) => *t += c.total_ms,
             _ => node_ms.push(c.total_ms),
         }
+        previous = Some(c.role);
     }
     trace.event("score", serde_json::to_value(&report).unwrap_or_default());
     let r = TaskPlanReport {
@@ -197,6 +203,8 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         symbolic_rejections: out.stats.symbolic_rejections,
         grammar_errors: is_grammar_error(&out.stop) as usize,
         node_ms,
+        read_ms: out.stats.read.as_ref().map(|r| r.ms),
+        read_tokens: out.stats.read.as_ref().map(|r| r.tokens),
         wall_ms: out.stats.wall_ms,
         replay_agrees,
         score: report,
@@ -266,6 +274,10 @@ pub struct PlanEvalReport {
     pub replans: PerTask,
     pub node_ms_p50: Option<f64>,
     pub node_ms_p99: Option<f64>,
+    /// Reading each task before its first node (see [`TaskPlanReport::read_ms`]).
+    pub read_ms_p50: Option<f64>,
+    pub read_ms_p99: Option<f64>,
+    pub read_tokens: PerTask,
     pub replay_disagreements: usize,
     /// Tasks per relevant-object rule, and the mean list length under each.
     pub relevant_rules: BTreeMap<String, (usize, f64)>,
@@ -280,6 +292,8 @@ impl PlanEvalReport {
         let summary = Summary::of(&scores);
         let mut node_ms: Vec<f64> = tasks.iter().flat_map(|t| t.node_ms.iter().copied()).collect();
         node_ms.sort_by(f64::total_cmp);
+        let mut read_ms: Vec<f64> = tasks.iter().filter_map(|t| t.read_ms).collect();
+        read_ms.sort_by(f64::total_cmp);
         let mut rules: BTreeMap<String, (usize, usize)> = BTreeMap::new();
         let mut stops: BTreeMap<String, usize> = BTreeMap::new();
         for t in &tasks {
@@ -317,6 +331,9 @@ impl PlanEvalReport {
             replans: per_task(&tasks, |t| t.replans),
             node_ms_p50: percentile(&node_ms, 50.0),
             node_ms_p99: percentile(&node_ms, 99.0),
+            read_ms_p50: percentile(&read_ms, 50.0),
+            read_ms_p99: percentile(&read_ms, 99.0),
+            read_tokens: per_task(&tasks, |t| t.read_tokens.unwrap_or(0)),
             replay_disagreements: tasks.iter().filter(|t| !t.replay_agrees).count(),
             relevant_rules: rules.into_iter().map(|(k, (n, sum))| (k, (n, sum as f64 / n.max(1) as f64))).collect(),
             stops,
@@ -360,6 +377,14 @@ impl PlanEvalReport {
         out.push_str(&row("replans", &self.replans));
         let ms = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1} ms"));
         out.push_str(&format!("per-node latency: p50 {}, p99 {}\n", ms(self.node_ms_p50), ms(self.node_ms_p99)));
+        if self.read_ms_p50.is_some() {
+            out.push_str(&format!(
+                "reading the task before its first node: p50 {}, p99 {}, {:.0} tokens a task\n",
+                ms(self.read_ms_p50),
+                ms(self.read_ms_p99),
+                self.read_tokens.mean
+            ));
+        }
         let rules: Vec<String> =
             self.relevant_rules.iter().map(|(k, (n, m))| format!("{k}: {n} tasks, {m:.1} objects each")).collect();
         out.push_str(&format!("relevant objects by rule: {}\n", rules.join("; ")));

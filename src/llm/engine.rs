@@ -162,7 +162,8 @@ pub enum WarmSource {
     Computed,
 }
 
-/// What [`Generate::warm`] did.
+/// What [`Generate::warm`] or [`Generate::read`] did (`tokens`: the prefix's, or for `read` the
+/// lead's tokens that were not already cached).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Warm {
     pub tokens: usize,
@@ -189,6 +190,14 @@ pub trait Generate {
     /// to where the text of a following user turn begins. A model without a cache does nothing.
     fn warm(&mut self, prefix: &[Message]) -> Result<Warm> {
         let _ = prefix;
+        Ok(Warm::default())
+    }
+
+    /// Puts `lead`, the beginning of the user turn after `prefix`, in the cache too: a run's own
+    /// context (a task and its objects) read before its first call, in memory only (no
+    /// snapshot: it is this run's). Only the tokens not already cached are computed.
+    fn read(&mut self, prefix: &[Message], lead: &str) -> Result<Warm> {
+        let _ = (prefix, lead);
         Ok(Warm::default())
     }
 }
@@ -289,9 +298,15 @@ impl Engine {
     /// `messages` rendered up to where the text of a following user turn begins: the part of every
     /// prompt that starts with these messages which the template writes the same.
     pub fn render_prefix(&self, messages: &[Message]) -> Result<String> {
+        self.render_lead(messages, "")
+    }
+
+    /// `messages` and then `lead`, the beginning of a following user turn's text, rendered as
+    /// every prompt that continues so writes them.
+    pub fn render_lead(&self, messages: &[Message], lead: &str) -> Result<String> {
         const MARK: &str = "\u{1}step: the prefix ends here\u{1}";
         let mut m = messages.to_vec();
-        m.push(Message::user(MARK));
+        m.push(Message::user(format!("{lead}{MARK}")));
         let text = self.render(&Prompt::Chat(m))?;
         match text.find(MARK) {
             Some(i) => Ok(text[..i].to_string()),
@@ -376,6 +391,27 @@ impl Generate for Engine {
             }
             warm.snapshot = Some(path);
         }
+        warm.ms = ms(t0);
+        Ok(warm)
+    }
+
+    fn read(&mut self, prefix: &[Message], lead: &str) -> Result<Warm> {
+        let t0 = Instant::now();
+        let ids = self.tokenizer.encode(&self.render_lead(prefix, lead)?)?;
+        let context = self.model.config().context_length;
+        if ids.len() >= context {
+            return Err(LlmError::PromptTooLong { prompt_tokens: ids.len(), context });
+        }
+        let keep = common_prefix(&self.cached, &ids);
+        let mut warm = Warm { tokens: ids.len() - keep, ..Warm::default() };
+        if keep == ids.len() {
+            warm.source = WarmSource::Cached;
+            return Ok(warm);
+        }
+        self.model.truncate(keep);
+        self.cached.truncate(keep);
+        self.forward(&ids[keep..])?;
+        warm.source = WarmSource::Computed;
         warm.ms = ms(t0);
         Ok(warm)
     }

@@ -560,29 +560,10 @@ impl HeadBlock<'_> {
                 }
             }
         }
-        // Softmax of each (row, head), up to four heads side by side: each sum still takes its
-        // keys in order, but four independent sums overlap instead of each waiting on its own
-        // previous add.
+        // Softmax of each (row, head) over the keys it sees.
         for (r, i) in rows.clone().enumerate() {
-            let n = seen(i);
-            for g0 in (0..ng).step_by(4) {
-                let hs = (ng - g0).min(4);
-                let at = |h: usize| (r * ng + g0 + h) * kv_len;
-                let (mut max, mut sum) = ([f32::NEG_INFINITY; 4], [0f32; 4]);
-                for h in 0..hs {
-                    max[h] = sc[at(h)..][..n].iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
-                }
-                for j in 0..n {
-                    for h in 0..hs {
-                        let e = &mut sc[at(h) + j];
-                        *e = (*e - max[h]).exp();
-                        sum[h] += *e;
-                    }
-                }
-                for h in 0..hs {
-                    let inv = 1.0 / sum[h];
-                    sc[at(h)..][..n].iter_mut().for_each(|p| *p *= inv);
-                }
+            for g in 0..ng {
+                O::softmax(&mut sc[(r * ng + g) * kv_len..][..seen(i)]);
             }
         }
         // The weighted sums, a block of values at a time for every row and head: each output
@@ -640,13 +621,11 @@ fn rms_norm(x: &[f32], w: &[f32], eps: f32, y: &mut [f32]) {
 }
 
 /// `g = silu(g) · u`, element by element; on the pool for prompts (an exp per element is a
-/// serial stretch the other threads would wait through).
+/// stretch the other threads would otherwise wait through).
 fn swiglu(g: &mut [f32], u: &[f32]) {
     const CHUNK: usize = 8192;
     let f = |g: &mut [f32], u: &[f32]| {
-        for (g, u) in g.iter_mut().zip(u) {
-            *g = *g / (1.0 + (-*g).exp()) * u;
-        }
+        super::kernels::attn::silu_gate(g, u);
     };
     let n = g.len();
     if n < 2 * CHUNK {
@@ -724,15 +703,7 @@ mod tests {
         // SAFETY: callers pass `O` only where its CPU features are present.
         unsafe {
             let mut sc: Vec<f32> = (0..seen).map(|j| O::dot(q, &keys[j * kvw + kv..][..hd]) * scale).collect();
-            let mut max = f32::NEG_INFINITY;
-            sc.iter().for_each(|&s| max = max.max(s));
-            let mut sum = 0f32;
-            for s in &mut sc {
-                *s = (*s - max).exp();
-                sum += *s;
-            }
-            let inv = 1.0 / sum;
-            sc.iter_mut().for_each(|p| *p *= inv);
+            O::softmax(&mut sc);
             O::weighted_sum(y, &sc, &values[kv..], kvw);
         }
     }

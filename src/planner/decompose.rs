@@ -355,7 +355,7 @@ impl Run<'_> {
         let odds: Vec<f64> = scoring.scores.iter().map(|s| s.logprob.exp()).collect();
         let p = odds[0] / odds.iter().sum::<f64>().max(f64::MIN_POSITIVE);
         let done = p >= at;
-        self.record(CallRecord::of_scoring(node, hash, &scoring, if done { "done" } else { "go on" }, total_ms));
+        self.record(CallRecord::of_scoring("done_check", node, hash, &scoring, if done { "done" } else { "go on" }, total_ms));
         self.trace.event("done_check", json!({"node": node, "p_done": (p * 1000.0).round() / 1000.0, "done": done}));
         Ok(done)
     }
@@ -413,7 +413,7 @@ impl Run<'_> {
                 best = i;
             }
         }
-        self.record(CallRecord::of_scoring(node, hash, &scoring, &answers[best], total_ms));
+        self.record(CallRecord::of_scoring("score", node, hash, &scoring, &answers[best], total_ms));
         let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(key).zip(answers.iter().map(String::as_str)).collect();
         top.sort_by(|a, b| b.0.total_cmp(&a.0));
         fields["node"] = json!(node);

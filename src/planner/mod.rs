@@ -402,7 +402,8 @@ impl std::fmt::Display for StopCause {
 /// One LLM call.
 #[derive(Clone, Debug, Serialize)]
 pub struct CallRecord {
-    /// `decompose`, `terminate` or `flat`.
+    /// `decompose`, `terminate` or `flat` (generations); `done_check` (the model's probability of
+    /// `done`) or `score` (a choice among whole answers ranked by likelihood).
     pub role: &'static str,
     /// The tree node the call was about.
     pub node: usize,
@@ -421,8 +422,10 @@ pub struct CallRecord {
 }
 
 impl CallRecord {
-    /// The record of one scoring pass that chose `chosen` among the candidates.
+    /// The record of one scoring pass (`role`: `done_check` or `score`) that chose `chosen` among
+    /// the candidates.
     pub fn of_scoring(
+        role: &'static str,
         node: usize,
         prompt_hash: String,
         s: &crate::llm::engine::Scoring,
@@ -430,7 +433,7 @@ impl CallRecord {
         total_ms: f64,
     ) -> CallRecord {
         CallRecord {
-            role: "score",
+            role,
             node,
             prompt_hash,
             output: chosen.to_string(),
@@ -443,6 +446,17 @@ impl CallRecord {
             mask_ms: 0.0,
             total_ms,
             stop: "scored".into(),
+        }
+    }
+
+    /// Whether this call begins a new decision, after a call of role `previous`: a decision is a
+    /// done check (where `done` may be answered), the decomposition call that proposes a node,
+    /// and the calls that judge or score the proposal. Latency "per node" is per decision.
+    pub fn starts_decision(&self, previous: Option<&str>) -> bool {
+        match self.role {
+            "done_check" => true,
+            "decompose" | "flat" => previous != Some("done_check"),
+            _ => previous.is_none(),
         }
     }
 
@@ -493,6 +507,9 @@ pub struct PlanStats {
     /// How the prompts' shared beginning got into the model's cache before the first call (none:
     /// the first call computed it, or no model ran).
     pub warm: Option<crate::llm::engine::Warm>,
+    /// The task and its context read into the cache after it, before the first node (none: the
+    /// first call read them).
+    pub read: Option<crate::llm::engine::Warm>,
 }
 
 impl PlanStats {

@@ -228,21 +228,32 @@ impl Run<'_> {
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
     }
 
-    /// Puts the prompts' shared beginning in the model's cache before the first call (read from
-    /// its snapshot where one is kept; see `llm::prefix`), so the first node costs what the others
-    /// do. Its time is reported on its own (`warm` event). A failure here is not the run's: the
-    /// first call computes the prefix, or meets the same error and handles it as calls do.
+    /// Puts the prompts' shared beginning in the model's cache before the first call: the system
+    /// message (read from its snapshot where one is kept; see `llm::prefix`), then the task and
+    /// its context, which every prompt of the run begins its user turn with. Their times are
+    /// reported on their own (`warm` and `read` events), so node latencies are the nodes' own;
+    /// what the model computes is the same either way. A failure here is not the run's: the first
+    /// call computes the prefix, or meets the same error and handles it as calls do.
     fn warm(&mut self) {
         if self.cfg.kind == PlannerKind::Random {
             return;
         }
-        match self.model.warm(&self.prompter.prefix()) {
+        let prefix = self.prompter.prefix();
+        match self.model.warm(&prefix) {
             Ok(w) if w.source == WarmSource::None => {}
             Ok(w) => {
                 self.trace.event("warm", json!(w));
                 self.stats.warm = Some(w);
             }
             Err(e) => self.trace.event("warm", json!({"error": e.to_string()})),
+        }
+        match self.model.read(&prefix, self.prompter.task()) {
+            Ok(r) if r.source == WarmSource::None => {}
+            Ok(r) => {
+                self.trace.event("read", json!({"tokens": r.tokens, "ms": r.ms}));
+                self.stats.read = Some(r);
+            }
+            Err(e) => self.trace.event("read", json!({"error": e.to_string()})),
         }
     }
 

@@ -87,6 +87,12 @@ impl Prompter {
         vec![Message::system(self.system.clone())]
     }
 
+    /// The beginning of every prompt's user turn: the task and its context (read once a run, before
+    /// the first node; see `Generate::read`).
+    pub fn task(&self) -> &str {
+        &self.task
+    }
+
     fn node_text(&self, v: &NodeView) -> String {
         let mut s = self.task.clone();
         s.push_str("State:\n");

@@ -1203,3 +1203,34 @@ fn below_a_line_the_model_set_only_the_steps_that_make_it_true_are_offered() {
     plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &shown, &defaults(), &mut TraceWriter::sink());
     assert!(m.grammars[0].contains("\"[PUTBACK] \""), "{}", m.grammars[0]);
 }
+
+/// A decision's calls are one node's latency: its done check, the proposal, and what judged or
+/// scored it; a done check that answered `done` is a decision of its own.
+#[test]
+fn calls_group_into_decisions() {
+    let roles = ["decompose", "terminate", "done_check", "decompose", "score", "done_check", "decompose", "done_check"];
+    let mut starts = Vec::new();
+    let mut previous = None;
+    for (i, role) in roles.into_iter().enumerate() {
+        let c = CallRecord {
+            role,
+            node: 0,
+            prompt_hash: String::new(),
+            output: String::new(),
+            prompt_tokens: 0,
+            reused_tokens: 0,
+            output_tokens: 0,
+            forced_tokens: 0,
+            prefill_ms: 0.0,
+            decode_ms: 0.0,
+            mask_ms: 0.0,
+            total_ms: 0.0,
+            stop: String::new(),
+        };
+        if c.starts_decision(previous) {
+            starts.push(i);
+        }
+        previous = Some(role);
+    }
+    assert_eq!(starts, [0, 2, 5, 7]);
+}

@@ -1,7 +1,10 @@
-//! The two float loops of attention, a query·key dot product and the probability-weighted sum of
-//! values, written once as portable code and once with AVX2/FMA intrinsics that compute the same
-//! bits: both use fused multiply-adds in the same order. Left to the auto-vectoriser these loops
-//! came out two floats wide, with the output row going through memory for every key.
+//! The float loops of attention (a query·key dot product, the softmax of a row of scores, the
+//! probability-weighted sum of values), written once as portable code and once with AVX2/FMA
+//! intrinsics that compute the same bits: both use the same operations in the same order. Left to
+//! the auto-vectoriser the dot and the sum came out two floats wide, with the output row going
+//! through memory for every key; the softmax called the C library's `expf` once a score (a sixth of
+//! a planner node's time), whose bits also depend on which C library the robot has and which
+//! variant it picks for the CPU.
 
 use super::reduce_lanes;
 #[cfg(target_arch = "x86_64")]
@@ -25,12 +28,73 @@ pub trait AttnOps {
     /// As [`AttnOps::dot`].
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8];
 
+    /// In place, `row[j] = e_j / Σ e`, where `e_j` is [`exp_le0`] of `row[j] - max(row)` and the sum
+    /// runs in eight lanes (lane `l` takes elements `8c + l` in order), reduced as
+    /// [`reduce_lanes`], then any tail elements added in order.
+    ///
+    /// # Safety
+    /// As [`AttnOps::dot`]; `row` is not empty.
+    unsafe fn softmax(row: &mut [f32]);
+
     /// For every element `e` of `y`: `y[e] = fma(p[j], values[j * stride + e], y[e])` for each `j`
     /// in order.
     ///
     /// # Safety
     /// As [`AttnOps::dot`]; `values` must hold `(p.len() - 1) * stride + y.len()` floats.
     unsafe fn weighted_sum(y: &mut [f32], p: &[f32], values: &[f32], stride: usize);
+}
+
+/// Below this the softmax's exponential is 0: `e^-87` is the last power of e that is a normal
+/// float, and beside the row's largest term (1) nothing smaller counts.
+const EXP_FLOOR: f32 = -87.0;
+/// ln 2 in two parts (Cody and Waite): `n · LN2_HI` is exact for every `n` that occurs.
+const LN2_HI: f32 = 0.693_359_4;
+const LN2_LO: f32 = -2.121_944_4e-4;
+/// The Taylor coefficients 1/k! of eˣ for k = 7 down to 2: on |r| ≤ ln2/2 the first term left out
+/// is below 10⁻⁸, under half an ulp.
+const EXP_POLY: [f32; 6] = [1.0 / 5040.0, 1.0 / 720.0, 1.0 / 120.0, 1.0 / 24.0, 1.0 / 6.0, 0.5];
+
+/// `eˣ` for `x ≤ 0` (0 below [`EXP_FLOOR`], and for NaN): `x = n·ln2 + r`, `eˣ = 2ⁿ·p(r)`, with
+/// `p` the degree-7 Taylor polynomial by fused multiply-adds. Within a few ulps of the true value;
+/// what matters more is that every CPU and C library gets the same bits, and that the AVX2 loop
+/// below computes exactly this.
+#[inline(always)]
+pub fn exp_le0(x: f32) -> f32 {
+    if !(x >= EXP_FLOOR) {
+        return 0.0;
+    }
+    let n = (x * std::f32::consts::LOG2_E).round_ties_even();
+    let r = n.mul_add(-LN2_LO, n.mul_add(-LN2_HI, x));
+    let mut p = EXP_POLY[0];
+    for c in &EXP_POLY[1..] {
+        p = p.mul_add(r, *c);
+    }
+    p = p.mul_add(r, 1.0);
+    p = p.mul_add(r, 1.0);
+    // 2ⁿ for n in -126..=0, by its bits.
+    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
+/// SwiGLU's gate in place: `g = silu(g) · u`, with `silu(x) = x · σ(x)` and the logistic σ
+/// from [`exp_le0`] of `-|x|` (`1/(1+e)` for `x ≥ 0`, `e/(1+e)` below), so the FFN's bits too are
+/// the same on every C library. The AVX2 loop is chosen when the kernels are.
+pub fn silu_gate(g: &mut [f32], u: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if matches!(super::kernel(), super::Kernel::Avx2 | super::Kernel::Avx512) {
+        // SAFETY: those kernels are chosen only when the CPU has AVX2 and FMA.
+        return unsafe { Avx2::silu_gate(g, u) };
+    }
+    silu_gate_portable(g, u)
+}
+
+#[inline(always)]
+fn silu_gate_portable(g: &mut [f32], u: &[f32]) {
+    for (x, u) in g.iter_mut().zip(u) {
+        // -|x| as `min(x, 0 - x)`: the AVX2 loop's operation (-0.0 for x = 0 either way).
+        let e = exp_le0(x.min(0.0 - *x));
+        let num = if *x >= 0.0 { 1.0 } else { e };
+        *x = *x * (num / (1.0 + e)) * u;
+    }
 }
 
 /// Plain Rust, for any CPU.
@@ -57,6 +121,26 @@ impl AttnOps for Portable {
     #[inline(always)]
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
         b.map(|b| Self::dot(a, b))
+    }
+
+    #[inline(always)]
+    unsafe fn softmax(row: &mut [f32]) {
+        let max = row.iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
+        let mut acc = [0f32; 8];
+        let mut chunks = row.chunks_exact_mut(8);
+        for x in &mut chunks {
+            for l in 0..8 {
+                x[l] = exp_le0(x[l] - max);
+                acc[l] += x[l];
+            }
+        }
+        let mut sum = reduce_lanes(&acc);
+        for x in chunks.into_remainder() {
+            *x = exp_le0(*x - max);
+            sum += *x;
+        }
+        let inv = 1.0 / sum;
+        row.iter_mut().for_each(|p| *p *= inv);
     }
 
     #[inline(always)]
@@ -91,6 +175,47 @@ impl Avx2 {
             c += 8;
         }
         (acc, c..n)
+    }
+
+    /// [`exp_le0`] of each lane, each operation as there.
+    #[inline(always)]
+    unsafe fn exp_le0(v: __m256) -> __m256 {
+        let k = _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(_mm256_mul_ps(
+            v,
+            _mm256_set1_ps(std::f32::consts::LOG2_E),
+        ));
+        let r = _mm256_fmadd_ps(k, _mm256_set1_ps(-LN2_LO), _mm256_fmadd_ps(k, _mm256_set1_ps(-LN2_HI), v));
+        let one = _mm256_set1_ps(1.0);
+        let mut p = _mm256_set1_ps(EXP_POLY[0]);
+        for co in &EXP_POLY[1..] {
+            p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(*co));
+        }
+        p = _mm256_fmadd_ps(p, r, one);
+        p = _mm256_fmadd_ps(p, r, one);
+        // 2ⁿ by its bits (garbage below the floor, masked next).
+        let scale =
+            _mm256_castsi256_ps(_mm256_slli_epi32::<23>(_mm256_add_epi32(_mm256_cvtps_epi32(k), _mm256_set1_epi32(127))));
+        // 0 where not v ≥ floor (NaN included), as `exp_le0`.
+        _mm256_and_ps(_mm256_mul_ps(p, scale), _mm256_cmp_ps::<_CMP_GE_OQ>(v, _mm256_set1_ps(EXP_FLOOR)))
+    }
+
+    /// [`silu_gate`] eight at a time, each operation as there.
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn silu_gate(g: &mut [f32], u: &[f32]) {
+        let n = g.len().min(u.len());
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        let mut c = 0;
+        while c + 8 <= n {
+            let x = _mm256_loadu_ps(g.as_ptr().add(c));
+            // -|x|, then the numerator: 1 where x ≥ 0, else e.
+            let e = Self::exp_le0(_mm256_min_ps(x, _mm256_sub_ps(zero, x)));
+            let num = _mm256_blendv_ps(e, one, _mm256_cmp_ps::<_CMP_GE_OQ>(x, zero));
+            let s = _mm256_div_ps(num, _mm256_add_ps(one, e));
+            let y = _mm256_mul_ps(_mm256_mul_ps(x, s), _mm256_loadu_ps(u.as_ptr().add(c)));
+            _mm256_storeu_ps(g.as_mut_ptr().add(c), y);
+            c += 8;
+        }
+        silu_gate_portable(&mut g[c..n], &u[c..n]);
     }
 
     /// `s` with the tail elements of `a·b` fused in, in order.
@@ -139,6 +264,44 @@ impl AttnOps for Avx2 {
             *s = Self::fuse_tail(*s, a, b, tail.clone());
         }
         out
+    }
+
+    #[inline(always)]
+    unsafe fn softmax(row: &mut [f32]) {
+        let (n, x) = (row.len(), row.as_mut_ptr());
+        // The maximum: any order gives the same value.
+        let mut m8 = _mm256_set1_ps(f32::NEG_INFINITY);
+        let mut c = 0;
+        while c + 8 <= n {
+            m8 = _mm256_max_ps(m8, _mm256_loadu_ps(x.add(c)));
+            c += 8;
+        }
+        let mut lanes = [0f32; 8];
+        _mm256_storeu_ps(lanes.as_mut_ptr(), m8);
+        let max = row[c..].iter().chain(&lanes).fold(f32::NEG_INFINITY, |m, &s| m.max(s));
+        let maxv = _mm256_set1_ps(max);
+        let mut acc = _mm256_setzero_ps();
+        let mut c = 0;
+        while c + 8 <= n {
+            let e = Self::exp_le0(_mm256_sub_ps(_mm256_loadu_ps(x.add(c)), maxv));
+            _mm256_storeu_ps(x.add(c), e);
+            acc = _mm256_add_ps(acc, e);
+            c += 8;
+        }
+        _mm256_storeu_ps(lanes.as_mut_ptr(), acc);
+        let mut sum = reduce_lanes(&lanes);
+        for e in row[c..].iter_mut() {
+            *e = exp_le0(*e - max);
+            sum += *e;
+        }
+        let inv = _mm256_set1_ps(1.0 / sum);
+        let mut c = 0;
+        while c + 8 <= n {
+            _mm256_storeu_ps(x.add(c), _mm256_mul_ps(_mm256_loadu_ps(x.add(c)), inv));
+            c += 8;
+        }
+        let inv = 1.0 / sum;
+        row[c..].iter_mut().for_each(|p| *p *= inv);
     }
 
     #[inline(always)]

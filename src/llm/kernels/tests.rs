@@ -149,6 +149,53 @@ fn f16_conversion_is_exact_for_every_bit_pattern() {
 }
 
 #[test]
+fn the_softmax_exponential_is_within_four_ulps_and_exact_at_the_ends() {
+    use super::attn::exp_le0;
+    assert_eq!(exp_le0(0.0), 1.0);
+    assert_eq!(exp_le0(-0.0), 1.0);
+    assert_eq!(exp_le0(-87.5), 0.0);
+    assert_eq!(exp_le0(f32::NEG_INFINITY), 0.0);
+    assert_eq!(exp_le0(f32::NAN), 0.0);
+    // Every 97th float from -87 to 0.
+    let (lo, hi) = ((-87.0f32).to_bits(), (-0.0f32).to_bits());
+    let mut worst = 0f64;
+    for b in (hi..=lo).step_by(97) {
+        let x = f32::from_bits(b);
+        let (got, want) = (exp_le0(x) as f64, (x as f64).exp());
+        let ulp = f32::EPSILON as f64 * (want as f32).abs() as f64;
+        worst = worst.max((got - want).abs() / ulp);
+    }
+    assert!(worst <= 4.0, "worst error {worst} ulp");
+}
+
+/// The SwiGLU gate is silu(g)·u to a few ulps, at both signs, zero and far out, and the AVX2
+/// loop gives the portable bits (with the tail past the last eight).
+#[test]
+fn the_silu_gate_is_accurate_and_simd_equals_portable_bit_for_bit() {
+    let mut rng = StdRng::seed_from_u64(29);
+    let mut g: Vec<f32> = randn(&mut rng, 1003).iter().map(|x| x * 6.0).collect();
+    g.extend([0.0, -0.0, 1.0, -1.0, 90.0, -90.0, 20.0, -20.0, 1e-30, -1e-30]);
+    let u = randn(&mut rng, g.len());
+    let mut simd = g.clone();
+    attn::silu_gate(&mut simd, &u);
+    for ((&x, &u), &y) in g.iter().zip(&u).zip(&simd) {
+        let want = x as f64 / (1.0 + (-(x as f64)).exp()) * u as f64;
+        assert!((y as f64 - want).abs() <= 8.0 * f32::EPSILON as f64 * want.abs() + 1e-35, "silu({x})·{u} = {y}, want {want}");
+    }
+    if avx2::available() {
+        let mut portable = g.clone();
+        // The dispatch took the AVX2 loop on this CPU unless a kernel was forced.
+        for (x, u) in portable.iter_mut().zip(&u) {
+            let mut one = [*x];
+            // A slice of one runs the scalar tail, which is the portable code.
+            attn::silu_gate(&mut one, std::slice::from_ref(u));
+            *x = one[0];
+        }
+        assert!(portable.iter().zip(&simd).all(|(a, b)| a.to_bits() == b.to_bits()), "silu gate: AVX2 and portable differ");
+    }
+}
+
+#[test]
 fn attention_loops_simd_equal_portable_bit_for_bit() {
     use super::attn::{AttnOps, Portable};
     if !avx2::available() {
@@ -170,6 +217,18 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
             let one = unsafe { Portable::dot(&a, eight[k]) };
             assert_eq!(one.to_bits(), x8[k].to_bits(), "portable dot8, hd {hd}, key {k}");
             assert_eq!(one.to_bits(), y8[k].to_bits(), "avx2 dot8, hd {hd}, key {k}");
+        }
+        for n in [1, 5, 8, 37, 2000] {
+            let row: Vec<f32> = randn(&mut rng, n).iter().map(|x| x * 9.0).collect();
+            let (mut x, mut y) = (row.clone(), row.clone());
+            // SAFETY: as above.
+            unsafe {
+                Portable::softmax(&mut x);
+                attn::Avx2::softmax(&mut y);
+            }
+            assert!(x.iter().zip(&y).all(|(a, b)| a.to_bits() == b.to_bits()), "softmax of {n}");
+            let total: f64 = x.iter().map(|&p| p as f64).sum();
+            assert!((total - 1.0).abs() < 1e-5, "softmax of {n} sums to {total}");
         }
         for keys in [1, 7, 40] {
             let stride = hd + 24;
