@@ -108,11 +108,12 @@ fn check_against_reference(file: &str, arch: Arch) {
         let (a, b) = (argmax(&lo).unwrap(), argmax(&lr).unwrap());
         if a != b {
             // Allowed only at a near tie, where 8-bit rounding may pick either: the reference must
-            // rate our choice within the noise measured above (1% of its largest logit).
+            // rate our choice within the noise measured above (a logit differs by up to 2% of the
+            // largest: 0.020-0.021 for SmolLM2, with the C library's exp and with ours).
             let top = lr.iter().fold(0f32, |x, y| x.max(y.abs()));
             let gap = lr[b as usize] - lr[a as usize];
             eprintln!("{file}: greedy choices differ at step {step} at a near tie ({gap} of {top})");
-            assert!(gap < 0.01 * top, "{file}: greedy choices differ at step {step}: {a} vs {b}, gap {gap}");
+            assert!(gap < 0.02 * top, "{file}: greedy choices differ at step {step}: {a} vs {b}, gap {gap}");
             ties += 1;
         }
         let pos = ids.len() + step;

@@ -233,7 +233,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         );
     }
     let how = match &report.prefix {
-        Some(w) => format!("system message {} tokens {:?} in {:.0} ms", w.tokens, w.source, w.ms).to_lowercase(),
+        Some(w) => format!("system message {} tokens {}", w.tokens, w.describe()),
         None => "system message computed by the first call".into(),
     };
     eprintln!("before the first node: model loaded in {:.0} ms, {how}", report.model_load_ms);

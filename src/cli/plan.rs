@@ -14,7 +14,7 @@ use serde_json::{json, Value};
 use super::args::InferenceArgs;
 use crate::eval::task::Task;
 use crate::eval::TaskSource;
-use crate::llm::engine::Engine;
+use crate::llm::engine::{Engine, Warm, WarmSource};
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
 use crate::llm::sample::Sampling;
 use crate::planner::replay::{compare, read_trace};
@@ -183,24 +183,12 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             "verdict" => {
                 eprintln!("{}    -> {}", indent(node, &depth_of), v["verdict"].as_str().unwrap_or(""));
             }
-            "warm" => match v["source"].as_str() {
-                Some(source) if source != "cached" => {
-                    let ms = v["ms"].as_f64().unwrap_or(0.0);
-                    let how = if source == "loaded" {
-                        format!("read from its snapshot in {ms:.0} ms")
-                    } else if v["note"].is_null() {
-                        format!("computed in {ms:.0} ms, kept for the next run")
-                    } else {
-                        format!("computed in {ms:.0} ms")
-                    };
-                    let note = v["note"].as_str().map(|n| format!(" ({n})")).unwrap_or_default();
-                    eprintln!("  [system message: {} tokens {how}{note}]", v["tokens"]);
+            "warm" => match (v["error"].as_str(), serde_json::from_value::<Warm>(v.clone())) {
+                (Some(e), _) => eprintln!("  [system message not prepared ahead: {e}]"),
+                (None, Ok(w)) if w.source != WarmSource::Cached => {
+                    eprintln!("  [system message: {} tokens {}]", w.tokens, w.describe())
                 }
-                _ => {
-                    if let Some(e) = v["error"].as_str() {
-                        eprintln!("  [system message not prepared ahead: {e}]");
-                    }
-                }
+                _ => {}
             },
             "read" => match v["error"].as_str() {
                 Some(e) => eprintln!("  [task not read ahead: {e}]"),

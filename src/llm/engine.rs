@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::chat::{ChatTemplate, Message};
 use super::constraint::GrammarCompiler;
@@ -148,7 +148,7 @@ pub struct Scoring {
 }
 
 /// Where a prompt's constant beginning came from when [`Generate::warm`] put it in the cache.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum WarmSource {
     /// Nothing done: this model keeps no cache, or no snapshot directory is set.
@@ -164,7 +164,7 @@ pub enum WarmSource {
 
 /// What [`Generate::warm`] or [`Generate::read`] did (`tokens`: the prefix's, or for `read` the
 /// lead's tokens that were not already cached).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Warm {
     pub tokens: usize,
     pub source: WarmSource,
@@ -173,6 +173,23 @@ pub struct Warm {
     pub snapshot: Option<PathBuf>,
     /// Why a snapshot could not be read or written (the run goes on: it only costs time).
     pub note: Option<String>,
+}
+
+impl Warm {
+    /// How the tokens got into the cache, in words ("computed in 3277 ms, kept for the next run").
+    pub fn describe(&self) -> String {
+        let ms = self.ms;
+        let note = self.note.as_deref().map(|n| format!(" ({n})")).unwrap_or_default();
+        match self.source {
+            WarmSource::None => "not prepared ahead".into(),
+            WarmSource::Cached => "already in the cache".into(),
+            WarmSource::Loaded => format!("read from its snapshot in {ms:.0} ms"),
+            WarmSource::Computed if self.snapshot.is_some() && self.note.is_none() => {
+                format!("computed in {ms:.0} ms, kept for the next run")
+            }
+            WarmSource::Computed => format!("computed in {ms:.0} ms{note}"),
+        }
+    }
 }
 
 /// The calls the planner makes of a model: generate under a grammar, or rank a closed list of
