@@ -64,4 +64,11 @@ fn step_plan_on_the_demo_scene_ends_cleanly_with_a_complete_trace() {
     let first_call = |ev: &[Value]| ev.iter().find(|e| e["event"] == "call").map(|e| e["reused_tokens"].clone());
     assert_eq!(first_call(&events2), first_call(&events));
     assert!(first_call(&events2).and_then(|r| r.as_u64()).unwrap_or(0) >= warm(&events)["tokens"].as_u64().unwrap());
+    // The task was read into the cache after the system message, before the first call, which
+    // reuses both (but a boundary token the rest of its prompt may tokenize with).
+    let read = events.iter().find(|e| e["event"] == "read").unwrap();
+    let ahead = warm(&events)["tokens"].as_u64().unwrap() + read["tokens"].as_u64().unwrap();
+    assert!(read["tokens"].as_u64().unwrap() > 0, "{read}");
+    assert!(first_call(&events).and_then(|r| r.as_u64()).unwrap() + 1 >= ahead, "{read}");
+    assert!(v["stats"]["task_read"]["ms"].as_f64().is_some(), "{}", v["stats"]);
 }
