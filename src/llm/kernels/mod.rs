@@ -655,7 +655,8 @@ impl SendPtr {
 }
 
 /// What on this CPU decides the bits of a forward pass: the kernel path, and the features the C
-/// library's `expf` picks its variant by. Prefix snapshots are keyed by it.
+/// library picks its variants of `sinf` and `cosf` by (the rotary table; the exponentials are
+/// ours). Prefix snapshots are keyed by it.
 pub(crate) fn cpu_signature() -> String {
     #[cfg(target_arch = "x86_64")]
     let features = format!("fma={} avx512f={}", is_x86_feature_detected!("fma"), is_x86_feature_detected!("avx512f"));
