@@ -80,5 +80,20 @@ fn random_weight_models_always_end_with_parsed_outputs_and_replay_identically() 
         let again = plan(&mut engine, &mut env, &req, &cfg, &mut TraceWriter::sink());
         let diffs = compare(&rec, &again);
         assert!(diffs.is_empty(), "{label}: {diffs:?}");
+
+        // A run killed half way leaves a trace that replays as far as it goes; a replay that
+        // makes fewer calls than a complete trace differs.
+        let lines: Vec<&str> = text.lines().collect();
+        let cut = dir.path().join(format!("{i}-cut.jsonl"));
+        std::fs::write(&cut, lines[..lines.len() / 2].join("\n") + "\n").unwrap();
+        let rec_cut = read_trace(&cut).unwrap();
+        assert!(rec_cut.end.is_none() && rec_cut.calls.len() <= rec.calls.len(), "{label}");
+        let diffs = compare(&rec_cut, &again);
+        assert!(diffs.is_empty(), "{label}: a trace cut short: {diffs:?}");
+        if !again.stats.calls.is_empty() {
+            let mut fewer = again.clone();
+            fewer.stats.calls.pop();
+            assert!(!compare(&rec, &fewer).is_empty(), "{label}: a missing call went unnoticed");
+        }
     }
 }

@@ -436,7 +436,17 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut engine = load_engine(&model, &args.inference)?;
     let out = plan(&mut engine, env.as_mut(), &req, &cfg, &mut TraceWriter::sink());
     let diffs = compare(&recorded, &out);
-    if diffs.is_empty() {
+    if diffs.is_empty() && recorded.end.is_none() {
+        println!(
+            "identical as far as the trace goes: its {} model calls (it has no end event: the run was cut short, \
+             e.g. killed); the replay went on to {} calls, {} actions, stop: {}",
+            recorded.calls.len(),
+            out.stats.llm_calls,
+            out.executed.len(),
+            out.stop
+        );
+        Ok(())
+    } else if diffs.is_empty() {
         println!("identical: {} model calls, {} actions, stop: {}", out.stats.llm_calls, out.executed.len(), out.stop);
         Ok(())
     } else {
