@@ -140,8 +140,9 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         trace_dir: None,
     };
     cfg.planner.budgets.max_actions = a.max_actions;
-    // Every call, with the task it came from (node ids restart at each task).
-    let mut calls: Vec<(usize, CallRecord)> = Vec::new();
+    // Every call, and every decision (a node's calls merged), task by task.
+    let mut calls: Vec<CallRecord> = Vec::new();
+    let mut nodes: Vec<CallRecord> = Vec::new();
     let mut prefix = None;
     let mut reads: Vec<Warm> = Vec::new();
     let n_tasks;
@@ -152,7 +153,8 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let req = crate::planner::PlanRequest::new(instr.clone(), focus);
         let main_job = PlannerConfig { infer_goals: true, ..cfg.planner.clone() };
         let out = crate::planner::plan(&mut engine, &mut env, &req, &main_job, &mut TraceWriter::sink());
-        calls.extend(out.stats.calls.into_iter().map(|c| (0, c)));
+        nodes.extend(CallRecord::decisions(&out.stats.calls));
+        calls.extend(out.stats.calls);
         prefix = out.stats.warm;
         reads.extend(out.stats.read);
         n_tasks = 1;
@@ -167,35 +169,16 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
             let (_, stats) = plans::run_task_stats(&mut engine, t, &cfg);
             prefix = prefix.or(stats.warm);
             reads.extend(stats.read);
-            calls.extend(stats.calls.into_iter().map(|c| (i, c)));
+            nodes.extend(CallRecord::decisions(&stats.calls));
+            calls.extend(stats.calls);
         }
     }
     let mut roles: BTreeMap<String, Vec<&CallRecord>> = BTreeMap::new();
-    for (_, c) in &calls {
+    for c in &calls {
         roles.entry(c.role.to_string()).or_default().push(c);
     }
     let by_role: BTreeMap<String, Group> = roles.iter().map(|(k, v)| (k.clone(), group(v))).collect();
-    // Per node: the decision that proposed it, its calls merged (see `CallRecord::starts_decision`;
-    // merging by the calls' node would charge a parent with all its children's proposals).
-    let mut merged: Vec<(usize, CallRecord)> = Vec::new();
-    let mut last_role = "";
-    for (t, c) in &calls {
-        let previous = merged.last().filter(|(task, _)| task == t).map(|_| last_role);
-        last_role = c.role;
-        match merged.last_mut() {
-            Some((task, m)) if *task == *t && !c.starts_decision(previous) => {
-                m.prompt_tokens += c.prompt_tokens;
-                m.reused_tokens += c.reused_tokens;
-                m.output_tokens += c.output_tokens;
-                m.prefill_ms += c.prefill_ms;
-                m.decode_ms += c.decode_ms;
-                m.mask_ms += c.mask_ms;
-                m.total_ms += c.total_ms;
-            }
-            _ => merged.push((*t, c.clone())),
-        }
-    }
-    let node_refs: Vec<&CallRecord> = merged.iter().map(|(_, c)| c).collect();
+    let node_refs: Vec<&CallRecord> = nodes.iter().collect();
     let report = NodesReport {
         model: path.display().to_string(),
         planner: a.planner.to_string(),

@@ -20,7 +20,7 @@ use crate::action::Action;
 use crate::llm::engine::{GenOptions, Generate, Generation, Prompt};
 use crate::llm::LlmError;
 use crate::planner::{
-    self, DryRunEnv, Env, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, SimEnv, StopCause,
+    self, CallRecord, DryRunEnv, Env, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, SimEnv, StopCause,
     TraceWriter,
 };
 use crate::program::{PlanFormat, Program};
@@ -176,17 +176,8 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         }
         _ => true,
     };
-    // A tree node's latency: the decision that proposed it, its calls in order (grouping by the
-    // calls' node would charge a parent with all its children's calls).
-    let mut node_ms: Vec<f64> = Vec::new();
-    let mut previous = None;
-    for c in &out.stats.calls {
-        match node_ms.last_mut() {
-            Some(t) if !c.starts_decision(previous) => *t += c.total_ms,
-            _ => node_ms.push(c.total_ms),
-        }
-        previous = Some(c.role);
-    }
+    // A tree node's latency: the decision that proposed it.
+    let node_ms: Vec<f64> = CallRecord::decisions(&out.stats.calls).iter().map(|d| d.total_ms).collect();
     trace.event("score", serde_json::to_value(&report).unwrap_or_default());
     let r = TaskPlanReport {
         relevant_rule: task.relevance.rule,

@@ -334,6 +334,17 @@ impl Engine {
         }
     }
 
+    /// The tokens of [`Engine::render_lead`], which must leave room in the context for a prompt's
+    /// last token at least.
+    fn lead_tokens(&self, messages: &[Message], lead: &str) -> Result<Vec<u32>> {
+        let ids = self.tokenizer.encode(&self.render_lead(messages, lead)?)?;
+        let context = self.model.config().context_length;
+        if ids.len() >= context {
+            return Err(LlmError::PromptTooLong { prompt_tokens: ids.len(), context });
+        }
+        Ok(ids)
+    }
+
     /// Forgets the cached prefix (the next call prefills from scratch).
     pub fn reset(&mut self) {
         self.model.truncate(0);
@@ -377,14 +388,10 @@ impl Generate for Engine {
     /// before.
     fn warm(&mut self, prefix: &[Message]) -> Result<Warm> {
         let t0 = Instant::now();
-        let ids = self.tokenizer.encode(&self.render_prefix(prefix)?)?;
+        let ids = self.lead_tokens(prefix, "")?;
         let mut warm = Warm { tokens: ids.len(), ..Warm::default() };
         if ids.is_empty() {
             return Ok(warm);
-        }
-        let context = self.model.config().context_length;
-        if ids.len() >= context {
-            return Err(LlmError::PromptTooLong { prompt_tokens: ids.len(), context });
         }
         if common_prefix(&self.cached, &ids) == ids.len() {
             warm.source = WarmSource::Cached;
@@ -414,11 +421,7 @@ impl Generate for Engine {
 
     fn read(&mut self, prefix: &[Message], lead: &str) -> Result<Warm> {
         let t0 = Instant::now();
-        let ids = self.tokenizer.encode(&self.render_lead(prefix, lead)?)?;
-        let context = self.model.config().context_length;
-        if ids.len() >= context {
-            return Err(LlmError::PromptTooLong { prompt_tokens: ids.len(), context });
-        }
+        let ids = self.lead_tokens(prefix, lead)?;
         let keep = common_prefix(&self.cached, &ids);
         let mut warm = Warm { tokens: ids.len() - keep, ..Warm::default() };
         if keep == ids.len() {

@@ -624,9 +624,7 @@ fn rms_norm(x: &[f32], w: &[f32], eps: f32, y: &mut [f32]) {
 /// stretch the other threads would otherwise wait through).
 fn swiglu(g: &mut [f32], u: &[f32]) {
     const CHUNK: usize = 8192;
-    let f = |g: &mut [f32], u: &[f32]| {
-        super::kernels::attn::silu_gate(g, u);
-    };
+    let f = super::kernels::attn::silu_gate;
     let n = g.len();
     if n < 2 * CHUNK {
         return f(g, u);

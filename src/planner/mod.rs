@@ -460,6 +460,32 @@ impl CallRecord {
         }
     }
 
+    /// One run's calls merged decision by decision (see [`CallRecord::starts_decision`]): each
+    /// keeps the role and node of the call that opened it, with the tokens and milliseconds of
+    /// all its calls summed. Merging by the calls' node instead would charge a parent with all its
+    /// children's proposals.
+    pub fn decisions(calls: &[CallRecord]) -> Vec<CallRecord> {
+        let mut out: Vec<CallRecord> = Vec::new();
+        let mut previous = None;
+        for c in calls {
+            match out.last_mut() {
+                Some(m) if !c.starts_decision(previous) => {
+                    m.prompt_tokens += c.prompt_tokens;
+                    m.reused_tokens += c.reused_tokens;
+                    m.output_tokens += c.output_tokens;
+                    m.forced_tokens += c.forced_tokens;
+                    m.prefill_ms += c.prefill_ms;
+                    m.decode_ms += c.decode_ms;
+                    m.mask_ms += c.mask_ms;
+                    m.total_ms += c.total_ms;
+                }
+                _ => out.push(c.clone()),
+            }
+            previous = Some(c.role);
+        }
+        out
+    }
+
     /// The record of one generation: its tokens and timings as the engine reported them.
     pub fn of(
         role: &'static str,

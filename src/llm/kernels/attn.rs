@@ -4,7 +4,8 @@
 //! the auto-vectoriser the dot and the sum came out two floats wide, with the output row going
 //! through memory for every key; the softmax called the C library's `expf` once a score (a sixth of
 //! a planner node's time), whose bits also depend on which C library the robot has and which
-//! variant it picks for the CPU.
+//! variant it picks for the CPU. The FFN's SiLU gate (`silu_gate`) is here too: it takes the same
+//! exponential.
 
 use super::reduce_lanes;
 #[cfg(target_arch = "x86_64")]
