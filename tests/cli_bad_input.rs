@@ -274,3 +274,27 @@ fn bench_llm_busy_neighbour_takes_a_count_or_all() {
         assert!(stderr(&o).contains("model not found"), "{good:?}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn an_instruction_naming_an_object_the_scene_lacks_is_warned_about_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    // The planner's prompts are ~4,000 tokens with the tiny tokenizer.
+    let model = dir.path().join("tiny8k.gguf");
+    write_tiny_gguf(&TinySpec { context_length: 8192, ..TinySpec::llama().with_seed(1) }, &model).unwrap();
+    let model = model.display().to_string();
+    let plan = |instruction: &str| {
+        run(&["plan", instruction, "-m", &model, "--json", "--no-prefix-cache", "--max-llm-calls", "4", "--threads", "1"])
+    };
+    let o = plan("put the unicorn in the fridge");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("the instruction names \"unicorn\", and no object of the scene is called that"), "{err}");
+    assert!(err.contains("fridge") && err.contains("--scene FILE"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["unknown_objects"], serde_json::json!(["unicorn"]));
+    // The demo's own objects raise nothing.
+    let o = plan("put the apple in the fridge");
+    assert!(!stderr(&o).contains("no object of the scene"), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["unknown_objects"], serde_json::json!([]));
+}

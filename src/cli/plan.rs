@@ -294,6 +294,10 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let scene = scene_meta(args);
     let (world, task) = load_scene(&scene)?;
     let req = request(args.instruction.as_deref(), args.context.clone(), &world, task.as_ref(), args.oracle_stop)?;
+    let unknown = crate::planner::goals::unknown_objects(&world, &req.instruction);
+    if !unknown.is_empty() {
+        eprintln!("warning: {}", unknown_note(&unknown, &world));
+    }
     let mut env = make_env(&args.env, world, req.focus.clone())?;
     let path = resolve_model(&args.model)?;
     let mut engine = load_engine(&path, &args.inference)?;
@@ -316,11 +320,30 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             eprintln!("tree: {} and {}", p.display(), svg.display());
         }
     }
-    report(args.json, &out, goals.as_ref(), &path)?;
+    report(args.json, &out, goals.as_ref(), &path, &unknown)?;
     if let StopCause::Error(e) = &out.stop {
         bail!("the planner stopped on an error: {e}");
     }
     Ok(())
+}
+
+/// The warning for instruction phrases that name no object of the scene, with what the scene does
+/// have, so that the user can reword the instruction or give another scene.
+fn unknown_note(unknown: &[String], world: &World) -> String {
+    let quoted: Vec<String> = unknown.iter().map(|p| format!("\"{p}\"")).collect();
+    let kinds: std::collections::BTreeSet<&str> = world
+        .nodes()
+        .filter(|n| n.id != world.character() && !n.is_room())
+        .map(|n| n.class_name)
+        .collect();
+    let listed: Vec<&str> = kinds.iter().copied().take(40).collect();
+    let more = if kinds.len() > listed.len() { format!(" and {} more", kinds.len() - listed.len()) } else { String::new() };
+    format!(
+        "the instruction names {}, and no object of the scene is called that; the planner can only use \
+         the scene's objects ({}{more}): reword the instruction, or give a scene that has it (--scene FILE)",
+        quoted.join(", "),
+        listed.join(", ")
+    )
 }
 
 fn report(
@@ -328,6 +351,7 @@ fn report(
     out: &PlanOutcome,
     goals: Option<&crate::eval::goal::GoalCheck>,
     model: &Path,
+    unknown: &[String],
 ) -> anyhow::Result<()> {
     let s = &out.stats;
     let node_ms: Vec<f64> = s.calls.iter().map(|c| c.total_ms).collect();
@@ -338,6 +362,7 @@ fn report(
             "stop": out.stop,
             "goals_met": goals.map(|g| g.all_met()),
             "unmet_goals": goals.map(|g| g.unmet()),
+            "unknown_objects": unknown,
             "stats": {
                 "llm_calls": s.llm_calls, "prompt_tokens": s.prompt_tokens, "reused_tokens": s.reused_tokens,
                 "reuse_rate": s.reuse_rate(), "output_tokens": s.output_tokens, "forced_tokens": s.forced_tokens,
@@ -359,6 +384,10 @@ fn report(
         println!("  (nothing executed)");
     }
     println!("stop: {}", out.stop);
+    if !unknown.is_empty() {
+        let quoted: Vec<String> = unknown.iter().map(|p| format!("\"{p}\"")).collect();
+        println!("note: the instruction names {}, which the scene does not have (see the warning above)", quoted.join(", "));
+    }
     if let Some(g) = goals {
         if g.all_met() {
             println!("goals: all met");

@@ -538,25 +538,53 @@ impl HeadBlock<'_> {
         // Causal: row i sees keys 0..=pos+i.
         let seen = |i: usize| self.pos + i + 1;
         let all = seen(rows.end - 1);
-        // Scores.
+        // Scores, by unit: unit `u = r * ng + g` is row `rows.start + r` with the group's head `g`,
+        // its scores at `sc[u * kv_len..]`. The rows that see a block are a suffix of the rows
+        // (row i sees keys before pos + i + 1), so the units that do are too.
+        let units = rows.len() * ng;
+        let row_of = |u: usize| rows.start + u / ng;
+        let query = |u: usize| &self.q[(row_of(u) * nh + self.heads.start + u % ng) * hd..][..hd];
+        let scp = sc.as_mut_ptr();
+        debug_assert!(sc.len() >= units * kv_len);
         for j0 in (0..all).step_by(KEY_BLOCK) {
-            for (r, i) in rows.clone().enumerate().filter(|&(_, i)| j0 < seen(i)) {
-                let j1 = (j0 + KEY_BLOCK).min(seen(i));
-                for (g, head) in self.heads.clone().enumerate() {
-                    let qi = &self.q[(i * nh + head) * hd..][..hd];
-                    let sc = &mut sc[(r * ng + g) * kv_len..];
-                    let mut j = j0;
-                    // Eight keys at a time: independent multiply-add chains.
-                    while j + 8 <= j1 {
-                        let d = O::dot8(qi, std::array::from_fn(|k| key(j + k)));
-                        for (k, d) in d.into_iter().enumerate() {
-                            sc[j + k] = d * self.scale;
-                        }
-                        j += 8;
+            let mut u = rows.clone().position(|i| j0 < seen(i)).unwrap_or(rows.len()) * ng;
+            // Two units at a time share each key's load: four keys by two queries.
+            while u + 1 < units {
+                let (qa, qb) = (query(u), query(u + 1));
+                let (ja, jb) = ((j0 + KEY_BLOCK).min(seen(row_of(u))), (j0 + KEY_BLOCK).min(seen(row_of(u + 1))));
+                let (sa, sb) = (scp.add(u * kv_len), scp.add((u + 1) * kv_len));
+                let mut j = j0;
+                while j + 4 <= ja {
+                    let d = O::dot2x4(qa, qb, self.keys.as_ptr().add(j * kvw + kv), kvw);
+                    for k in 0..4 {
+                        *sa.add(j + k) = d[k] * self.scale;
+                        *sb.add(j + k) = d[4 + k] * self.scale;
                     }
-                    for j in j..j1 {
-                        sc[j] = O::dot(qi, key(j)) * self.scale;
+                    j += 4;
+                }
+                for j in j..ja {
+                    *sa.add(j) = O::dot(qa, key(j)) * self.scale;
+                }
+                for j in j..jb {
+                    *sb.add(j) = O::dot(qb, key(j)) * self.scale;
+                }
+                u += 2;
+            }
+            if u < units {
+                let qi = query(u);
+                let j1 = (j0 + KEY_BLOCK).min(seen(row_of(u)));
+                let s = scp.add(u * kv_len);
+                let mut j = j0;
+                // Eight keys at a time: independent multiply-add chains.
+                while j + 8 <= j1 {
+                    let d = O::dot8(qi, std::array::from_fn(|k| key(j + k)));
+                    for (k, d) in d.into_iter().enumerate() {
+                        *s.add(j + k) = d * self.scale;
                     }
+                    j += 8;
+                }
+                for j in j..j1 {
+                    *s.add(j) = O::dot(qi, key(j)) * self.scale;
                 }
             }
         }

@@ -203,9 +203,77 @@ pub fn names_verb(text: &str, v: Verb) -> bool {
     text.to_lowercase().split(|c: char| !c.is_alphanumeric()).any(|w| w.starts_with(stem))
 }
 
+/// Words that begin a noun phrase in an instruction ("put *the* apple in *my* fridge").
+const DETERMINERS: &[&str] =
+    &["the", "a", "an", "my", "your", "his", "her", "its", "our", "their", "this", "that", "these", "those", "some"];
+/// Words that end one ("the apple *in* the fridge", "the cup *and* the plate").
+const PHRASE_ENDS: &[&str] = &[
+    "in", "into", "inside", "on", "onto", "to", "at", "from", "with", "under", "near", "by", "of", "for", "and", "or",
+    "then", "off", "out", "up", "down", "back",
+];
+
+/// The noun phrases of `instruction` (the words after an article or a possessive, up to a
+/// preposition, a conjunction or the end) that name no object of the world: no word of the phrase
+/// is part of an object's class name, or begins or ends with one (plural "s"/"es" aside). The
+/// planner can only use the scene's objects, so "put the unicorn in the fridge" would otherwise end
+/// with nothing done and no word on why. Lenient on purpose ("the red apple" is matched by
+/// "apple", "the coffee" by `coffee_table`): a phrase it cannot read ("watch tv", no article) is
+/// not looked at, and a false alarm would be worse than none.
+pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
+    let classes: BTreeSet<String> = w
+        .nodes()
+        .filter(|n| n.id != w.character())
+        .map(|n| n.class_name.to_lowercase().replace(['_', ' '], ""))
+        .collect();
+    let names = |word: &str| {
+        let stem = [word.strip_suffix("es"), word.strip_suffix('s'), Some(word)]
+            .into_iter()
+            .flatten()
+            .filter(|s| s.len() >= 3)
+            .collect::<Vec<_>>();
+        stem.iter().any(|s| classes.iter().any(|c| c.contains(s) || s.starts_with(c.as_str()) || s.ends_with(c.as_str())))
+    };
+    let lower = instruction.to_lowercase();
+    let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < words.len() {
+        if !DETERMINERS.contains(&words[i]) {
+            i += 1;
+            continue;
+        }
+        let start = i + 1;
+        let mut end = start;
+        while end < words.len() && !PHRASE_ENDS.contains(&words[end]) && !DETERMINERS.contains(&words[end]) {
+            end += 1;
+        }
+        let phrase = &words[start..end];
+        let content: Vec<&&str> = phrase.iter().filter(|w| w.len() >= 3).collect();
+        if !content.is_empty() && !content.iter().any(|w| names(w)) {
+            let p = phrase.join(" ");
+            if !out.contains(&p) {
+                out.push(p);
+            }
+        }
+        i = end.max(start);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn phrases_that_name_no_object_of_the_scene_are_found() {
+        let w = World::demo();
+        assert_eq!(unknown_objects(&w, "put the unicorn in the fridge"), vec!["unicorn"]);
+        assert_eq!(unknown_objects(&w, "Put the red apples into my fridge."), Vec::<String>::new());
+        assert_eq!(unknown_objects(&w, "give the dragon and a golden harp to the apple"), vec!["dragon", "golden harp"]);
+        // No article, nothing looked at; an article with nothing after it, nothing either.
+        assert!(unknown_objects(&w, "watch unicorns").is_empty());
+        assert!(unknown_objects(&w, "put it in the").is_empty());
+    }
 
     #[test]
     fn candidates_are_what_the_world_can_state_about_the_objects_each_once() {

@@ -29,6 +29,16 @@ pub trait AttnOps {
     /// As [`AttnOps::dot`].
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8];
 
+    /// Two queries `a`, `b` (equal lengths) against four keys at `keys + k·stride`, k = 0..4:
+    /// `[a·k0, a·k1, a·k2, a·k3, b·k0, …, b·k3]`, each the same bits as [`AttnOps::dot`] alone.
+    /// Both queries take each key from one load, and the keys' addresses are one base and a
+    /// stride: given eight separate slices, the compiler stepped eight pointers through one chain
+    /// of additions inside the loop, and the multiply-adds waited on it.
+    ///
+    /// # Safety
+    /// As [`AttnOps::dot`]; the `a.len()` floats at each `keys + k·stride` must be readable.
+    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8];
+
     /// In place, `row[j] = e_j / Σ e`, where `e_j` is [`exp_le0`] of `row[j] - max(row)` and the sum
     /// runs in eight lanes (lane `l` takes elements `8c + l` in order), reduced as
     /// [`reduce_lanes`], then any tail elements added in order.
@@ -122,6 +132,12 @@ impl AttnOps for Portable {
     #[inline(always)]
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
         b.map(|b| Self::dot(a, b))
+    }
+
+    #[inline(always)]
+    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8] {
+        let key = |k: usize| std::slice::from_raw_parts(keys.add(k * stride), a.len());
+        std::array::from_fn(|i| Self::dot(if i < 4 { a } else { b }, key(i % 4)))
     }
 
     #[inline(always)]
@@ -219,6 +235,27 @@ impl Avx2 {
         silu_gate_portable(&mut g[c..n], &u[c..n]);
     }
 
+    /// The reductions of [`AttnOps::dot`] for eight accumulators side by side (the sums of key
+    /// `k`'s lanes land in lane `k`); every sum has the same two operands as there.
+    #[inline(always)]
+    unsafe fn reduce8(acc: &[__m256; 8]) -> __m256 {
+        // m = lo + hi half of each key: [m(k) | m(k+1)] per pair of keys.
+        let m = |k: usize| {
+            let lo = _mm256_permute2f128_ps::<0x20>(acc[k], acc[k + 1]);
+            let hi = _mm256_permute2f128_ps::<0x31>(acc[k], acc[k + 1]);
+            _mm256_add_ps(lo, hi)
+        };
+        let (m01, m23, m45, m67) = (m(0), m(2), m(4), m(6));
+        // n = (m0 + m2, m1 + m3) of each key: [k0 k2 | k1 k3] and [k4 k6 | k5 k7].
+        let pairs = |x: __m256, y: __m256| {
+            _mm256_add_ps(_mm256_shuffle_ps::<0b01_00_01_00>(x, y), _mm256_shuffle_ps::<0b11_10_11_10>(x, y))
+        };
+        let (n0, n1) = (pairs(m01, m23), pairs(m45, m67));
+        // n0 + n1 of each key: [k0 k2 k4 k6 | k1 k3 k5 k7], then into key order.
+        let r = _mm256_add_ps(_mm256_shuffle_ps::<0b10_00_10_00>(n0, n1), _mm256_shuffle_ps::<0b11_01_11_01>(n0, n1));
+        _mm256_permutevar8x32_ps(r, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7))
+    }
+
     /// `s` with the tail elements of `a·b` fused in, in order.
     #[inline(always)]
     unsafe fn fuse_tail(mut s: f32, a: &[f32], b: &[f32], tail: std::ops::Range<usize>) -> f32 {
@@ -243,30 +280,39 @@ impl AttnOps for Avx2 {
     #[inline(always)]
     unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
         let (acc, tail) = Self::lane_sums(a, b);
-        // The reductions of `dot`, eight keys side by side; every sum has the same two operands
-        // as there. m = lo + hi half of each key: [m(k) | m(k+1)] per pair of keys.
-        let m = |k: usize| {
-            let lo = _mm256_permute2f128_ps::<0x20>(acc[k], acc[k + 1]);
-            let hi = _mm256_permute2f128_ps::<0x31>(acc[k], acc[k + 1]);
-            _mm256_add_ps(lo, hi)
-        };
-        let (m01, m23, m45, m67) = (m(0), m(2), m(4), m(6));
-        // n = (m0 + m2, m1 + m3) of each key: [k0 k2 | k1 k3] and [k4 k6 | k5 k7].
-        let pairs = |x: __m256, y: __m256| {
-            _mm256_add_ps(_mm256_shuffle_ps::<0b01_00_01_00>(x, y), _mm256_shuffle_ps::<0b11_10_11_10>(x, y))
-        };
-        let (n0, n1) = (pairs(m01, m23), pairs(m45, m67));
-        // n0 + n1 of each key: [k0 k2 k4 k6 | k1 k3 k5 k7], then into key order.
-        let r = _mm256_add_ps(_mm256_shuffle_ps::<0b10_00_10_00>(n0, n1), _mm256_shuffle_ps::<0b11_01_11_01>(n0, n1));
-        let r = _mm256_permutevar8x32_ps(r, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
         let mut out = [0f32; 8];
-        _mm256_storeu_ps(out.as_mut_ptr(), r);
+        _mm256_storeu_ps(out.as_mut_ptr(), Self::reduce8(&acc));
         for (s, b) in out.iter_mut().zip(b) {
             *s = Self::fuse_tail(*s, a, b, tail.clone());
         }
         out
     }
 
+    #[inline(always)]
+    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8] {
+        let n = a.len().min(b.len());
+        let k: [*const f32; 4] = std::array::from_fn(|i| keys.add(i * stride));
+        let mut acc = [_mm256_setzero_ps(); 8];
+        let mut c = 0;
+        while c + 8 <= n {
+            let (x, y) = (_mm256_loadu_ps(a.as_ptr().add(c)), _mm256_loadu_ps(b.as_ptr().add(c)));
+            for (i, k) in k.iter().enumerate() {
+                let v = _mm256_loadu_ps(k.add(c));
+                acc[i] = _mm256_fmadd_ps(x, v, acc[i]);
+                acc[4 + i] = _mm256_fmadd_ps(y, v, acc[4 + i]);
+            }
+            c += 8;
+        }
+        let mut out = [0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), Self::reduce8(&acc));
+        if c < n {
+            for (i, s) in out.iter_mut().enumerate() {
+                let q = if i < 4 { a } else { b };
+                *s = Self::fuse_tail(*s, q, std::slice::from_raw_parts(k[i % 4], n), c..n);
+            }
+        }
+        out
+    }
     #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
         let (n, x) = (row.len(), row.as_mut_ptr());

@@ -218,6 +218,21 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
             assert_eq!(one.to_bits(), x8[k].to_bits(), "portable dot8, hd {hd}, key {k}");
             assert_eq!(one.to_bits(), y8[k].to_bits(), "avx2 dot8, hd {hd}, key {k}");
         }
+        // Four keys at a stride, two queries: each score as `dot` alone.
+        let stride = hd + 5;
+        let block = randn(&mut rng, 3 * stride + hd);
+        let q2 = randn(&mut rng, hd);
+        // SAFETY: as above; `block` holds the four keys at `stride`.
+        let (x24, y24) = unsafe {
+            (Portable::dot2x4(&a, &q2, block.as_ptr(), stride), attn::Avx2::dot2x4(&a, &q2, block.as_ptr(), stride))
+        };
+        for i in 0..8 {
+            let q = if i < 4 { &a } else { &q2 };
+            // SAFETY: the portable loop needs no CPU feature.
+            let one = unsafe { Portable::dot(q, &block[(i % 4) * stride..][..hd]) };
+            assert_eq!(one.to_bits(), x24[i].to_bits(), "portable dot2x4, hd {hd}, score {i}");
+            assert_eq!(one.to_bits(), y24[i].to_bits(), "avx2 dot2x4, hd {hd}, score {i}");
+        }
         for n in [1, 5, 8, 37, 2000] {
             let row: Vec<f32> = randn(&mut rng, n).iter().map(|x| x * 9.0).collect();
             let (mut x, mut y) = (row.clone(), row.clone());
