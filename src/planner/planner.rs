@@ -28,7 +28,7 @@ use super::tree::{NodeId, Status, SubgoalTree};
 use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
 use crate::action::Action;
 use crate::grammar::{ActionSet, Proposal, Verdict};
-use crate::llm::engine::{Generate, Prompt, StopReason, WarmSource};
+use crate::llm::engine::{Generate, Prompt, StopReason, Warm, WarmSource};
 use crate::llm::LlmError;
 use crate::world::{Fact, World};
 
@@ -239,21 +239,31 @@ impl Run<'_> {
             return;
         }
         let prefix = self.prompter.prefix();
-        match self.model.warm(&prefix) {
-            Ok(w) if w.source == WarmSource::None => {}
+        let warm = self.model.warm(&prefix);
+        self.stats.warm = self.prepared("warm", warm, |w| json!(w));
+        let read = self.model.read(&prefix, self.prompter.task());
+        self.stats.read = self.prepared("read", read, |r| json!({"tokens": r.tokens, "ms": r.ms}));
+    }
+
+    /// Traces one preparation of the cache (`warm`: the system message; `read`: the task) and
+    /// returns it for the stats, unless the model had nothing to prepare. A failure is traced and
+    /// costs nothing else: the first call then computes what it needs.
+    fn prepared(
+        &mut self,
+        event: &str,
+        done: crate::llm::Result<Warm>,
+        fields: impl Fn(&Warm) -> serde_json::Value,
+    ) -> Option<Warm> {
+        match done {
+            Ok(w) if w.source == WarmSource::None => None,
             Ok(w) => {
-                self.trace.event("warm", json!(w));
-                self.stats.warm = Some(w);
+                self.trace.event(event, fields(&w));
+                Some(w)
             }
-            Err(e) => self.trace.event("warm", json!({"error": e.to_string()})),
-        }
-        match self.model.read(&prefix, self.prompter.task()) {
-            Ok(r) if r.source == WarmSource::None => {}
-            Ok(r) => {
-                self.trace.event("read", json!({"tokens": r.tokens, "ms": r.ms}));
-                self.stats.read = Some(r);
+            Err(e) => {
+                self.trace.event(event, json!({"error": e.to_string()}));
+                None
             }
-            Err(e) => self.trace.event("read", json!({"error": e.to_string()})),
         }
     }
 
