@@ -548,7 +548,9 @@ impl HeadBlock<'_> {
         debug_assert!(sc.len() >= units * kv_len);
         for j0 in (0..all).step_by(KEY_BLOCK) {
             let mut u = rows.clone().position(|i| j0 < seen(i)).unwrap_or(rows.len()) * ng;
-            // Two units at a time share each key's load: four keys by two queries.
+            // Two units at a time share each key's load: four keys by two queries. Unit u's row
+            // is not after unit u + 1's, so it sees no more keys (ja ≤ jb); every write below is
+            // at a unit's row of `sc` (u < units), before its `kv_len`.
             while u + 1 < units {
                 let (qa, qb) = (query(u), query(u + 1));
                 let (ja, jb) = ((j0 + KEY_BLOCK).min(seen(row_of(u))), (j0 + KEY_BLOCK).min(seen(row_of(u + 1))));
@@ -767,26 +769,30 @@ mod tests {
                         one_head::<Portable>(qi, k, v, kvw, kv, scale, y);
                     }
                 }
-                for per_sub in [1, 2, 3] {
+                // Row blocks as the model makes them (16 rows) and smaller ones, odd and even.
+                for (per_sub, rows_per_job) in [(1, 16), (2, 16), (3, 16), (3, 5), (2, 4)] {
                     let mut got = vec![0f32; t * nh * hd];
                     let out = SendPtr(got.as_mut_ptr());
                     for kvh in 0..nkv {
                         for first in (kvh * group..(kvh + 1) * group).step_by(per_sub) {
                             let heads = first..(first + per_sub).min((kvh + 1) * group);
-                            let mut sc = vec![0f32; t * per_sub * kv_len];
                             let job = HeadBlock { q: &q, keys: &keys, values: &values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
-                            // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
-                            unsafe {
-                                if simd {
-                                    job.run_avx2(0..t, &mut sc)
-                                } else {
-                                    job.run::<Portable>(0..t, &mut sc)
-                                }
-                            };
+                            for r0 in (0..t).step_by(rows_per_job) {
+                                let rows = r0..(r0 + rows_per_job).min(t);
+                                let mut sc = vec![0f32; rows.len() * per_sub * kv_len];
+                                // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
+                                unsafe {
+                                    if simd {
+                                        job.run_avx2(rows, &mut sc)
+                                    } else {
+                                        job.run::<Portable>(rows, &mut sc)
+                                    }
+                                };
+                            }
                         }
                     }
                     let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
-                    assert!(same, "simd {simd}, {per_sub} heads per task, {t} rows after {pos}");
+                    assert!(same, "simd {simd}, {per_sub} heads and {rows_per_job} rows per task, {t} rows after {pos}");
                 }
             }
         }
