@@ -1,7 +1,7 @@
 //! Observations for the planner: a compact, deterministic text view of the state, bounded in size.
 //!
 //! The view has one line per task-relevant object (its states, what it is on or in, what is on or
-//! in it), then where the robot is, what it holds and what it is close to: the line that changes
+//! in it; floors, walls and ceilings after the others), then where the robot is, what it holds and what it is close to: the line that changes
 //! most often comes last, so a planner's prompt cache keeps the lines above it. A byte budget
 //! truncates the object lines at a line boundary with a marker saying how many were left out.
 //! The object catalogue (class, id, properties, states) is what grammar building needs.
@@ -26,6 +26,8 @@ pub struct ObjectInfo {
 
 /// At most this many names in one list (the rest is counted).
 const LIST_MAX: usize = 6;
+/// VirtualHome's categories for the building itself (shown after every other object).
+const STRUCTURE: [&str; 4] = ["Floor", "Floors", "Walls", "Ceiling"];
 
 impl World {
     /// The state as the planner sees it: the objects in `relevant` (ascending id; unknown ids are
@@ -36,7 +38,11 @@ impl World {
         let mut ids: Vec<u32> = relevant.iter().copied().filter(|&id| id != self.character()).collect();
         ids.sort_unstable();
         ids.dedup();
-        let rel_ix: Vec<Ix> = ids.iter().filter_map(|&id| self.ix(id)).collect();
+        let mut rel_ix: Vec<Ix> = ids.iter().filter_map(|&id| self.ix(id)).collect();
+        // The building's own floors, walls and ceilings last, so that the budget cuts them first:
+        // a task's relevant objects count a dozen of them, and in id order they used to fill the
+        // view before the objects the task is about (the phone of "Pick up phone" was cut).
+        rel_ix.sort_by_key(|&ix| self.is_structure_ix(ix));
 
         let mut lines = Vec::with_capacity(rel_ix.len() + 2);
         let mut robot = String::from("robot: in ");
@@ -101,6 +107,11 @@ impl World {
         }
         out.push_str(&robot);
         out
+    }
+
+    /// A floor, wall or ceiling (VirtualHome's categories for the building itself).
+    fn is_structure_ix(&self, ix: Ix) -> bool {
+        self.node(self.id(ix)).is_some_and(|n| STRUCTURE.contains(&n.category))
     }
 
     fn object_line(&self, ix: Ix) -> String {
@@ -309,6 +320,24 @@ mod tests {
         assert_eq!(b, a_);
         assert!(o.contains("<kitchencounter> (11): CLEAN; in <kitchen> (1); has on it <milk> (13), <bread> (14), <microwave> (15), <knife> (24), <rag> (26)"), "{o}");
         assert_eq!(o, w.observe(&[11, 10, 12, 12], 10_000), "order and duplicates do not matter");
+    }
+
+    #[test]
+    fn floors_walls_and_ceilings_come_after_the_objects_a_task_is_about() {
+        // The demo kitchen with a floor and a wall whose ids come before the fridge's.
+        let mut g: serde_json::Value = serde_json::from_str(super::super::demo::DEMO_KITCHEN_JSON).unwrap();
+        for (id, class, category) in [(4, "floor", "Floors"), (5, "wall", "Walls")] {
+            g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
+                {"id": id, "class_name": class, "category": category, "properties": [], "states": ["CLEAN"]}));
+            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": id, "relation_type": "INSIDE", "to_id": 1}));
+        }
+        let w = World::from_json(&g.to_string(), "test").unwrap();
+        let o = w.observe(&[4, 5, 10, 12], 10_000);
+        let starts: Vec<&str> = o.lines().map(|l| l.split(' ').next().unwrap()).collect();
+        assert_eq!(starts, ["<fridge>", "<apple>", "<floor>", "<wall>", "robot:"], "{o}");
+        // So a budget cuts the structure first.
+        let cut = w.observe(&[4, 5, 10, 12], 220);
+        assert!(cut.contains("<apple> (12)") && !cut.contains("<wall>"), "{cut}");
     }
 
     #[test]
