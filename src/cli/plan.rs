@@ -330,7 +330,6 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
 /// The warning for instruction phrases that name no object of the scene, with what the scene does
 /// have, so that the user can reword the instruction or give another scene.
 fn unknown_note(unknown: &[String], world: &World) -> String {
-    let quoted: Vec<String> = unknown.iter().map(|p| format!("\"{p}\"")).collect();
     let kinds: std::collections::BTreeSet<&str> = world
         .nodes()
         .filter(|n| n.id != world.character() && !n.is_room())
@@ -341,9 +340,14 @@ fn unknown_note(unknown: &[String], world: &World) -> String {
     format!(
         "the instruction names {}, and no object of the scene is called that; the planner can only use \
          the scene's objects ({}{more}): reword the instruction, or give a scene that has it (--scene FILE)",
-        quoted.join(", "),
+        quoted(unknown),
         listed.join(", ")
     )
+}
+
+/// `"a", "b"`: the phrases as the warning and the note quote them.
+fn quoted(phrases: &[String]) -> String {
+    phrases.iter().map(|p| format!("\"{p}\"")).collect::<Vec<_>>().join(", ")
 }
 
 fn report(
@@ -385,8 +389,7 @@ fn report(
     }
     println!("stop: {}", out.stop);
     if !unknown.is_empty() {
-        let quoted: Vec<String> = unknown.iter().map(|p| format!("\"{p}\"")).collect();
-        println!("note: the instruction names {}, which the scene does not have (see the warning above)", quoted.join(", "));
+        println!("note: the instruction names {}, which the scene does not have (see the warning above)", quoted(unknown));
     }
     if let Some(g) = goals {
         if g.all_met() {

@@ -1,9 +1,10 @@
 //! Observations for the planner: a compact, deterministic text view of the state, bounded in size.
 //!
 //! The view has one line per task-relevant object (its states, what it is on or in, what is on or
-//! in it; floors, walls and ceilings after the others), then where the robot is, what it holds and what it is close to: the line that changes
-//! most often comes last, so a planner's prompt cache keeps the lines above it. A byte budget
-//! truncates the object lines at a line boundary with a marker saying how many were left out.
+//! in it; floors, walls and ceilings after the others), then where the robot is, what it holds and
+//! what it is close to: the line that changes most often comes last, so a planner's prompt cache
+//! keeps the lines above it. A byte budget truncates the object lines at a line boundary with a
+//! marker saying how many were left out.
 //! The object catalogue (class, id, properties, states) is what grammar building needs.
 
 use std::fmt::Write;
@@ -30,8 +31,8 @@ const LIST_MAX: usize = 6;
 const STRUCTURE: [&str; 4] = ["Floor", "Floors", "Walls", "Ceiling"];
 
 impl World {
-    /// The state as the planner sees it: the objects in `relevant` (ascending id; unknown ids are
-    /// skipped), then the robot, in at most `budget` bytes (the robot's line is always shown). Cut
+    /// The state as the planner sees it: the objects in `relevant` (ascending id, floors, walls and
+    /// ceilings last; unknown ids are skipped), then the robot, in at most `budget` bytes (the robot's line is always shown). Cut
     /// object lines are counted in a line `… (N more lines not shown)`.
     pub fn observe(&self, relevant: &[u32], budget: usize) -> String {
         let c = self.char_ix();
@@ -111,7 +112,7 @@ impl World {
 
     /// A floor, wall or ceiling (VirtualHome's categories for the building itself).
     fn is_structure_ix(&self, ix: Ix) -> bool {
-        self.node(self.id(ix)).is_some_and(|n| STRUCTURE.contains(&n.category))
+        STRUCTURE.contains(&self.view(ix).category)
     }
 
     fn object_line(&self, ix: Ix) -> String {

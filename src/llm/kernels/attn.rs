@@ -313,6 +313,7 @@ impl AttnOps for Avx2 {
         }
         out
     }
+
     #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
         let (n, x) = (row.len(), row.as_mut_ptr());
