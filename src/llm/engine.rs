@@ -312,12 +312,6 @@ impl Engine {
         self.prefix_dir = dir;
     }
 
-    /// `messages` rendered up to where the text of a following user turn begins: the part of every
-    /// prompt that starts with these messages which the template writes the same.
-    pub fn render_prefix(&self, messages: &[Message]) -> Result<String> {
-        self.render_lead(messages, "")
-    }
-
     /// `messages` and then `lead`, the beginning of a following user turn's text, rendered as
     /// every prompt that continues so writes them.
     pub fn render_lead(&self, messages: &[Message], lead: &str) -> Result<String> {

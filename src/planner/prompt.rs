@@ -1,6 +1,6 @@
 //! The planner's prompts: one system message shared by both roles (the method, the embodiment's
-//! actions, worked examples on the demo kitchen), then the task, then the node's own part last, so the
-//! engine's prefix reuse recomputes only the tail.
+//! actions, the two questions; short, since every decision attends to all of it), then the task,
+//! then the node's own part last, so the engine's prefix reuse recomputes only the tail.
 //!
 //! The two roles are one conversation: the termination question is asked as the next user turn after
 //! the decomposition's answer, so a verdict's prompt extends the decomposition's prompt (and its
