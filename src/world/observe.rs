@@ -27,13 +27,12 @@ pub struct ObjectInfo {
 
 /// At most this many names in one list (the rest is counted).
 const LIST_MAX: usize = 6;
-/// VirtualHome's categories for the building itself (shown after every other object).
-const STRUCTURE: [&str; 4] = ["Floor", "Floors", "Walls", "Ceiling"];
 
 impl World {
     /// The state as the planner sees it: the objects in `relevant` (ascending id, floors, walls and
-    /// ceilings last; unknown ids are skipped), then the robot, in at most `budget` bytes (the robot's line is always shown). Cut
-    /// object lines are counted in a line `… (N more lines not shown)`.
+    /// ceilings last; unknown ids are skipped), then the robot, in at most `budget` bytes (the
+    /// robot's line is always shown). Cut object lines are counted in a line `… (N more lines not
+    /// shown)`.
     pub fn observe(&self, relevant: &[u32], budget: usize) -> String {
         let c = self.char_ix();
         let mut ids: Vec<u32> = relevant.iter().copied().filter(|&id| id != self.character()).collect();
@@ -43,7 +42,7 @@ impl World {
         // The building's own floors, walls and ceilings last, so that the budget cuts them first:
         // a task's relevant objects count a dozen of them, and in id order they used to fill the
         // view before the objects the task is about (the phone of "Pick up phone" was cut).
-        rel_ix.sort_by_key(|&ix| self.is_structure_ix(ix));
+        rel_ix.sort_by_key(|&ix| self.view(ix).is_structure());
 
         let mut lines = Vec::with_capacity(rel_ix.len() + 2);
         let mut robot = String::from("robot: in ");
@@ -108,11 +107,6 @@ impl World {
         }
         out.push_str(&robot);
         out
-    }
-
-    /// A floor, wall or ceiling (VirtualHome's categories for the building itself).
-    fn is_structure_ix(&self, ix: Ix) -> bool {
-        STRUCTURE.contains(&self.view(ix).category)
     }
 
     fn object_line(&self, ix: Ix) -> String {

@@ -63,6 +63,10 @@ impl NodeView<'_> {
     pub fn is_room(&self) -> bool {
         self.category == "Rooms"
     }
+    /// A floor, wall or ceiling: VirtualHome's categories for the building itself.
+    pub fn is_structure(&self) -> bool {
+        matches!(self.category, "Floor" | "Floors" | "Walls" | "Ceiling")
+    }
 }
 
 /// A scene's current state. See the module documentation.
