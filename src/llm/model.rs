@@ -20,6 +20,7 @@ use candle_core::Device;
 
 use super::gguf::{Arch, GgufFile};
 use super::kernels::attn::{AttnOps, Portable};
+use super::kernels::scores::{self, KeyTiles, Queries, Query, KEYS, MAX_QUERIES};
 use super::kernels::{dot_f32, kernel, matmul, matmul_many, pool, Kernel, Q8Acts, QMatrix, SendPtr};
 use super::{LlmError, Result};
 
@@ -55,6 +56,12 @@ impl ModelConfig {
             ));
         }
         let head_dim = n_embd / n_head;
+        if !KeyTiles::fits(head_dim) {
+            return Err(bad(
+                "attention.head_count",
+                format!("a head width of {head_dim} ({n_embd} / {n_head} heads): attention needs a multiple of 4"),
+            ));
+        }
         if let Some(rope_dim) = md.opt_u32(&key("rope.dimension_count"))? {
             if rope_dim as usize != head_dim {
                 return Err(bad(
@@ -90,11 +97,15 @@ impl ModelConfig {
 }
 
 /// One layer's keys and values, position-major (`[pos][n_head_kv * head_dim]`), grown on demand;
-/// the first `len` positions are valid.
+/// the first `len` positions are valid. Attention reads the keys as 16-bit integer tiles (`k16`,
+/// scales `ks`: [`scores`]); the f32 keys are what prefix snapshots store, the tiles being made from
+/// them.
 #[derive(Debug, Clone, Default)]
 struct LayerCache {
     k: Vec<f32>,
     v: Vec<f32>,
+    k16: Vec<i16>,
+    ks: Vec<f32>,
     len: usize,
 }
 
@@ -104,15 +115,34 @@ struct LayerCache {
 const CACHE_STEP: usize = 128;
 
 impl LayerCache {
-    /// Makes room for `n` positions of `width` floats, keeping the valid ones.
-    fn reserve(&mut self, n: usize, width: usize) {
+    /// Makes room for `n` positions of `shape`'s keys and values, keeping the valid ones.
+    fn reserve(&mut self, n: usize, shape: KeyTiles) {
+        let width = shape.nkv * shape.hd;
         let have = self.k.len() / width;
         if have < n {
-            let cap = n.max(have + have / 8).next_multiple_of(CACHE_STEP) * width;
+            // A whole number of tiles (CACHE_STEP is a multiple of KEYS).
+            let positions = n.max(have + have / 8).next_multiple_of(CACHE_STEP);
+            let cap = positions * width;
             for kv in [&mut self.k, &mut self.v] {
                 // Exact: `resize` alone would round the capacity up to a power of two.
                 kv.reserve_exact(cap - kv.len());
                 kv.resize(cap, 0.0);
+            }
+            let (elements, scales) = shape.sizes(positions);
+            self.k16.reserve_exact(elements - self.k16.len());
+            self.k16.resize(elements, 0);
+            self.ks.reserve_exact(scales - self.ks.len());
+            self.ks.resize(scales, 0.0);
+        }
+    }
+
+    /// Quantises the f32 keys of positions `from..to` into the tiles.
+    fn tile_keys(&mut self, from: usize, to: usize, shape: KeyTiles) {
+        let width = shape.nkv * shape.hd;
+        for p in from..to {
+            for h in 0..shape.nkv {
+                let x = &self.k[p * width + h * shape.hd..][..shape.hd];
+                shape.store(&mut self.k16, &mut self.ks, p, h, x);
             }
         }
     }
@@ -150,6 +180,7 @@ struct Scratch {
     u: Vec<f32>,
     rope: Vec<f32>,
     q8: Q8Acts,
+    queries: Queries,
 }
 
 /// Sets `v` to `n` elements (contents unspecified), allocating only to grow.
@@ -259,7 +290,7 @@ impl Transformer {
                 + opt(&l.bq)
                 + opt(&l.bk)
                 + opt(&l.bv);
-            kv += f(&l.cache.k) + f(&l.cache.v);
+            kv += f(&l.cache.k) + f(&l.cache.v) + l.cache.k16.capacity() * 2 + f(&l.cache.ks);
         }
         let s = &self.scratch;
         let bufs = [&s.x, &s.h, &s.q, &s.k, &s.v, &s.att, &s.o, &s.g, &s.u, &s.rope];
@@ -283,17 +314,23 @@ impl Transformer {
     /// Replaces the cache by `n` positions that `fill` writes, slice by slice in the order of
     /// [`Transformer::cache_slices`]. On an error the cache is left empty.
     pub fn restore_cache<E>(&mut self, n: usize, mut fill: impl FnMut(&mut [f32]) -> std::result::Result<(), E>) -> std::result::Result<(), E> {
-        let w = self.cfg.n_head_kv * self.cfg.head_dim;
+        let shape = self.key_tiles();
+        let w = shape.nkv * shape.hd;
         self.truncate(0);
         for l in &mut self.layers {
-            l.cache.reserve(n, w);
+            l.cache.reserve(n, shape);
             fill(&mut l.cache.k[..n * w])?;
             fill(&mut l.cache.v[..n * w])?;
         }
         for l in &mut self.layers {
+            l.cache.tile_keys(0, n, shape);
             l.cache.len = n;
         }
         Ok(())
+    }
+
+    fn key_tiles(&self) -> KeyTiles {
+        KeyTiles { nkv: self.cfg.n_head_kv, hd: self.cfg.head_dim }
     }
 
     /// Forgets every cached position from `len` on (prefix reuse: keep the shared part).
@@ -377,7 +414,7 @@ impl Transformer {
         }
         rope_table(&self.inv_freq, pos, t, &mut s.rope);
         for layer in &mut self.layers {
-            layer.cache.reserve(pos + t, cfg.n_head_kv * cfg.head_dim);
+            layer.cache.reserve(pos + t, KeyTiles { nkv: cfg.n_head_kv, hd: cfg.head_dim });
             layer.cache.len = pos;
             let h = fit(&mut h_buf, t * d);
             rms_norm(x, &layer.attn_norm, eps, h);
@@ -431,13 +468,17 @@ impl Layer {
         }
         self.cache.k[pos * kvw..(pos + t) * kvw].copy_from_slice(k);
         self.cache.v[pos * kvw..(pos + t) * kvw].copy_from_slice(v);
+        let shape = KeyTiles { nkv, hd };
+        self.cache.tile_keys(pos, pos + t, shape);
         self.cache.len = pos + t;
+        let scale = 1.0 / (hd as f32).sqrt();
+        s.queries.quantize(q, hd, scale);
 
         // One task per (kv head, sub-group of its query heads, block of queries): the query heads
-        // that share a kv head read each block of its keys and values together, while it is in L1,
-        // instead of each head streaming the whole cache. Sub-groups only when there would
-        // otherwise be too few tasks to share out (decoding); every (query, head) result is
-        // computed the same way whatever the grouping.
+        // that share a kv head read each tile of its keys and each block of its values together,
+        // while it is in L1, instead of each head streaming the whole cache. Sub-groups only when
+        // there would otherwise be too few tasks to share out (decoding); every (query, head)
+        // result is computed the same way whatever the grouping.
         let kv_len = pos + t;
         let group = nh / nkv;
         let qblock = 16;
@@ -450,8 +491,8 @@ impl Layer {
         let att = fit(&mut s.att, t * nh * hd);
         att.fill(0.0);
         let out = SendPtr(att.as_mut_ptr());
-        let (keys, values, q) = (&self.cache.k[..kv_len * kvw], &self.cache.v[..kv_len * kvw], &*q);
-        let scale = 1.0 / (hd as f32).sqrt();
+        let cache = &self.cache;
+        let (queries, values) = (&s.queries, &cache.v[..kv_len * kvw]);
         let kernel = kernel();
         let task = |task: usize| {
             let (kvh, sub, qb) = (task % nkv, task / nkv % subs, task / (nkv * subs));
@@ -459,12 +500,25 @@ impl Layer {
             let heads = first..(first + per_sub).min((kvh + 1) * group);
             // Each task writes only the (query, head) slices of `att` it owns; the buffer outlives
             // the pool job.
-            let job = HeadBlock { q, keys, values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
+            let job = HeadBlock {
+                queries,
+                tiles: &cache.k16,
+                scales: &cache.ks,
+                shape,
+                kernel,
+                values,
+                heads,
+                kvh,
+                nh,
+                pos,
+                kv_len,
+                out: &out,
+            };
             let rows = qb * qblock..((qb + 1) * qblock).min(t);
             // The scores of every (row, head) of the task, in the running thread's own buffer:
             // its size follows the threads, not the tasks.
             SCORES.with_borrow_mut(|buf| {
-                let sc = fit(buf, rows.len() * job.heads.len() * kv_len);
+                let sc = fit(buf, rows.len() * job.heads.len() * job.stride());
                 match kernel {
                     // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has
                     // AVX2 and FMA.
@@ -483,19 +537,21 @@ impl Layer {
 /// Query heads sharing one kv head over a block of query rows: scores against every cached key up
 /// to each query's own position (causal), softmax, weighted sum of the values, written into `out`.
 struct HeadBlock<'a> {
-    q: &'a [f32],
-    keys: &'a [f32],
+    /// Every (row, query head) of the call, quantised.
+    queries: &'a Queries,
+    /// The layer's key tiles and their scales.
+    tiles: &'a [i16],
+    scales: &'a [f32],
+    shape: KeyTiles,
+    /// Which score loops run.
+    kernel: Kernel,
     values: &'a [f32],
     /// The query heads, all of kv head `kvh`.
     heads: std::ops::Range<usize>,
     kvh: usize,
     nh: usize,
-    kvw: usize,
-    hd: usize,
     pos: usize,
-    /// The row length of each head's scores in the task's buffer.
     kv_len: usize,
-    scale: f32,
     out: &'a SendPtr,
 }
 
@@ -504,11 +560,16 @@ thread_local! {
     static SCORES: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// Keys (and values) per block that the heads of a group go over together: 64 rows of a 64-wide
-/// head are 16 KB, so a block stays in L1 while every head of the group reads it.
-const KEY_BLOCK: usize = 64;
+/// Values per block that the heads of a group go over together: 64 rows of a 64-wide head are
+/// 16 KB, so a block stays in L1 while every head of the group reads it.
+const VALUE_BLOCK: usize = 64;
 
 impl HeadBlock<'_> {
+    /// The row length of each (row, head)'s scores in the task's buffer: whole tiles.
+    fn stride(&self) -> usize {
+        self.kv_len.next_multiple_of(KEYS)
+    }
+
     /// The same code over the AVX2 loops, compiled with those features; both loop sets compute the
     /// same bits (see [`super::kernels::attn`]), so both paths give the same results.
     #[cfg(target_arch = "x86_64")]
@@ -523,89 +584,61 @@ impl HeadBlock<'_> {
     }
 
     /// # Safety
-    /// `O`'s CPU features must be present; `sc` holds `rows.len() × heads.len()` rows of `kv_len`.
+    /// `O`'s CPU features must be present; `sc` holds `rows.len() × heads.len()` rows of
+    /// [`HeadBlock::stride`].
     ///
-    /// Block by block of keys, every query row of the task and every head of the group read the
-    /// block while it is in L1: the cache of one kv head (a megabyte at 2,000 positions) is
-    /// streamed once per task rather than once per query row. Each (row, head) still takes its
-    /// keys in order, so the bits do not depend on the blocking.
+    /// Tile by tile of keys, then block by block of values, every query row of the task and every
+    /// head of the group read it while it is in L1: the cache of one kv head is streamed once per
+    /// task rather than once per query row. Each (row, head) still takes its values in order, so
+    /// the bits do not depend on the blocking.
     #[inline(always)]
     unsafe fn run<O: AttnOps>(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
-        let (hd, kvw, nh, kv_len) = (self.hd, self.kvw, self.nh, self.kv_len);
+        let (hd, nh, stride) = (self.shape.hd, self.nh, self.stride());
+        let kvw = self.shape.nkv * hd;
         let kv = self.kvh * hd;
         let ng = self.heads.len();
-        let key = |j: usize| &self.keys[j * kvw + kv..][..hd];
         // Causal: row i sees keys 0..=pos+i.
         let seen = |i: usize| self.pos + i + 1;
         let all = seen(rows.end - 1);
         // Scores, by unit: unit `u = r * ng + g` is row `rows.start + r` with the group's head `g`,
-        // its scores at `sc[u * kv_len..]`. The rows that see a block are a suffix of the rows
+        // its scores at `sc[u * stride..]`. The rows that see a tile are a suffix of the rows
         // (row i sees keys before pos + i + 1), so the units that do are too.
         let units = rows.len() * ng;
         let row_of = |u: usize| rows.start + u / ng;
-        let query = |u: usize| &self.q[(row_of(u) * nh + self.heads.start + u % ng) * hd..][..hd];
+        let query = |u: usize| self.queries.get(row_of(u) * nh + self.heads.start + u % ng);
         let scp = sc.as_mut_ptr();
-        debug_assert!(sc.len() >= units * kv_len);
-        for j0 in (0..all).step_by(KEY_BLOCK) {
+        debug_assert!(sc.len() >= units * stride);
+        let tl = self.shape.tile_len();
+        for j0 in (0..all).step_by(KEYS) {
+            let t = self.shape.tile(j0, self.kvh);
+            let (tile, scales) = (&self.tiles[t * tl..][..tl], &self.scales[t * KEYS..][..KEYS]);
             let mut u = rows.clone().position(|i| j0 < seen(i)).unwrap_or(rows.len()) * ng;
-            // Two units at a time share each key's load: four keys by two queries. Unit u's row
-            // is not after unit u + 1's, so it sees no more keys (ja ≤ jb); every write below is
-            // at a unit's row of `sc` (u < units), before its `kv_len`.
-            while u + 1 < units {
-                let (qa, qb) = (query(u), query(u + 1));
-                let (ja, jb) = ((j0 + KEY_BLOCK).min(seen(row_of(u))), (j0 + KEY_BLOCK).min(seen(row_of(u + 1))));
-                let (sa, sb) = (scp.add(u * kv_len), scp.add((u + 1) * kv_len));
-                let mut j = j0;
-                while j + 4 <= ja {
-                    let d = O::dot2x4(qa, qb, self.keys.as_ptr().add(j * kvw + kv), kvw);
-                    for k in 0..4 {
-                        *sa.add(j + k) = d[k] * self.scale;
-                        *sb.add(j + k) = d[4 + k] * self.scale;
-                    }
-                    j += 4;
-                }
-                for j in j..ja {
-                    *sa.add(j) = O::dot(qa, key(j)) * self.scale;
-                }
-                for j in j..jb {
-                    *sb.add(j) = O::dot(qb, key(j)) * self.scale;
-                }
-                u += 2;
-            }
-            if u < units {
-                let qi = query(u);
-                let j1 = (j0 + KEY_BLOCK).min(seen(row_of(u)));
-                let s = scp.add(u * kv_len);
-                let mut j = j0;
-                // Eight keys at a time: independent multiply-add chains.
-                while j + 8 <= j1 {
-                    let d = O::dot8(qi, std::array::from_fn(|k| key(j + k)));
-                    for (k, d) in d.into_iter().enumerate() {
-                        *s.add(j + k) = d * self.scale;
-                    }
-                    j += 8;
-                }
-                for j in j..j1 {
-                    *s.add(j) = O::dot(qi, key(j)) * self.scale;
-                }
+            while u < units {
+                // A few units at a time share each load of the tile; every write is inside a
+                // unit's row of `sc` (j0 + KEYS ≤ stride).
+                let n = (units - u).min(MAX_QUERIES);
+                let qs: [Query; MAX_QUERIES] = std::array::from_fn(|k| query((u + k).min(units - 1)));
+                let out: [*mut f32; MAX_QUERIES] = std::array::from_fn(|k| scp.add((u + k).min(units - 1) * stride + j0));
+                scores::tile_scores(self.kernel, self.shape, tile, scales, &qs[..n], &out[..n]);
+                u += n;
             }
         }
         // Softmax of each (row, head) over the keys it sees.
         for (r, i) in rows.clone().enumerate() {
             for g in 0..ng {
-                O::softmax(&mut sc[(r * ng + g) * kv_len..][..seen(i)]);
+                O::softmax(&mut sc[(r * ng + g) * stride..][..seen(i)]);
             }
         }
         // The weighted sums, a block of values at a time for every row and head: each output
         // element still takes its keys in order (the sum goes through `y` between blocks,
         // exactly).
-        for j0 in (0..all).step_by(KEY_BLOCK) {
+        for j0 in (0..all).step_by(VALUE_BLOCK) {
             for (r, i) in rows.clone().enumerate().filter(|&(_, i)| j0 < seen(i)) {
-                let j1 = (j0 + KEY_BLOCK).min(seen(i));
+                let j1 = (j0 + VALUE_BLOCK).min(seen(i));
                 for (g, head) in self.heads.clone().enumerate() {
                     // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
                     let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * nh + head) * hd), hd) };
-                    let p = &sc[(r * ng + g) * kv_len..];
+                    let p = &sc[(r * ng + g) * stride..];
                     O::weighted_sum(y, &p[j0..j1], &self.values[j0 * kvw + kv..], kvw);
                 }
             }
@@ -723,50 +756,67 @@ mod tests {
         }
     }
 
-    /// The attention of one query head as it was computed before heads were grouped: all keys'
-    /// scores, softmax, one weighted sum over all values.
-    fn one_head<O: AttnOps>(q: &[f32], keys: &[f32], values: &[f32], kvw: usize, kv: usize, scale: f32, y: &mut [f32]) {
-        let hd = y.len();
-        let seen = keys.len() / kvw;
+    /// The attention of one query head as it was computed before heads were grouped: every key's
+    /// score on its own (the portable definition), softmax, one weighted sum over all values.
+    fn one_head<O: AttnOps>(q: Query, tiles: (&[i16], &[f32]), shape: KeyTiles, kvh: usize, seen: usize, values: &[f32], y: &mut [f32]) {
+        let (hd, kvw) = (shape.hd, shape.nkv * shape.hd);
+        let mut sc = vec![0f32; seen.next_multiple_of(KEYS)];
+        for j0 in (0..seen).step_by(KEYS) {
+            let t = shape.tile(j0, kvh);
+            let tile = (&tiles.0[t * shape.tile_len()..][..shape.tile_len()], &tiles.1[t * KEYS..][..KEYS]);
+            // SAFETY: KEYS floats after the pointer; the portable loops need no CPU feature.
+            unsafe { scores::tile_scores(Kernel::Scalar, shape, tile.0, tile.1, &[q], &[sc[j0..].as_mut_ptr()]) };
+        }
+        sc.truncate(seen);
         // SAFETY: callers pass `O` only where its CPU features are present.
         unsafe {
-            let mut sc: Vec<f32> = (0..seen).map(|j| O::dot(q, &keys[j * kvw + kv..][..hd]) * scale).collect();
             O::softmax(&mut sc);
-            O::weighted_sum(y, &sc, &values[kv..], kvw);
+            O::weighted_sum(y, &sc, &values[kvh * hd..], kvw);
         }
     }
 
-    /// Grouped heads over blocks of keys give exactly the per-head results, for groups of one,
-    /// part of and all of a kv head's query heads, over several key blocks and a partial one.
+    /// Grouped heads over tiles of keys and blocks of values give exactly the per-head results,
+    /// for groups of one, part of and all of a kv head's query heads, over several tiles and a
+    /// partial one, with every kernel this CPU has.
     #[test]
     fn grouped_attention_equals_one_head_at_a_time_bit_for_bit() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(23);
-        // A few rows far into the cache, and rows that straddle key blocks.
+        // A few rows far into the cache, and rows that straddle tiles and value blocks.
         for (pos, t) in [(150, 3), (70, 21)] {
             let (nh, nkv, hd) = (6, 2, 64);
             let (kvw, kv_len, group) = (nkv * hd, pos + t, nh / nkv);
+            let shape = KeyTiles { nkv, hd };
             let mut r = |n: usize| (0..n).map(|_| rng.random_range(-2.0f32..2.0)).collect::<Vec<_>>();
             let (q, keys, values) = (r(t * nh * hd), r(kv_len * kvw), r(kv_len * kvw));
-            let scale = 0.125;
+            let (nb, ns) = shape.sizes(kv_len);
+            let (mut tiles, mut scales) = (vec![0i16; nb], vec![0f32; ns]);
+            for p in 0..kv_len {
+                for h in 0..nkv {
+                    shape.store(&mut tiles, &mut scales, p, h, &keys[p * kvw + h * hd..][..hd]);
+                }
+            }
+            let mut queries = Queries::default();
+            queries.quantize(&q, hd, 0.125);
             let avx2 = super::super::kernels::avx2::available();
-            for simd in [false, true] {
-                if simd && !avx2 {
-                    eprintln!("skipped the AVX2 half: this CPU has no AVX2/FMA");
+            let avx512 = super::super::kernels::avx512::available();
+            for (simd, kernel) in [(false, Kernel::Scalar), (true, Kernel::Avx2), (true, Kernel::Avx512)] {
+                if (kernel == Kernel::Avx2 && !avx2) || (kernel == Kernel::Avx512 && !avx512) {
+                    eprintln!("skipped {kernel:?}: this CPU does not have it");
                     continue;
                 }
                 let mut want = vec![0f32; t * nh * hd];
                 for i in 0..t {
                     let seen = pos + i + 1;
                     for h in 0..nh {
-                        let (qi, y) = (&q[(i * nh + h) * hd..][..hd], &mut want[(i * nh + h) * hd..][..hd]);
-                        let (k, v, kv) = (&keys[..seen * kvw], &values[..seen * kvw], h / group * hd);
+                        let (qi, y) = (queries.get(i * nh + h), &mut want[(i * nh + h) * hd..][..hd]);
+                        let v = &values[..seen * kvw];
                         #[cfg(target_arch = "x86_64")]
                         if simd {
-                            one_head::<super::super::kernels::attn::Avx2>(qi, k, v, kvw, kv, scale, y);
+                            one_head::<super::super::kernels::attn::Avx2>(qi, (&tiles, &scales), shape, h / group, seen, v, y);
                             continue;
                         }
-                        one_head::<Portable>(qi, k, v, kvw, kv, scale, y);
+                        one_head::<Portable>(qi, (&tiles, &scales), shape, h / group, seen, v, y);
                     }
                 }
                 // Row blocks as the model makes them (16 rows) and smaller ones, odd and even.
@@ -776,11 +826,25 @@ mod tests {
                     for kvh in 0..nkv {
                         for first in (kvh * group..(kvh + 1) * group).step_by(per_sub) {
                             let heads = first..(first + per_sub).min((kvh + 1) * group);
-                            let job = HeadBlock { q: &q, keys: &keys, values: &values, heads, kvh, nh, kvw, hd, pos, kv_len, scale, out: &out };
+                            let job = HeadBlock {
+                                queries: &queries,
+                                tiles: &tiles,
+                                scales: &scales,
+                                shape,
+                                kernel,
+                                values: &values,
+                                heads,
+                                kvh,
+                                nh,
+                                pos,
+                                kv_len,
+                                out: &out,
+                            };
                             for r0 in (0..t).step_by(rows_per_job) {
                                 let rows = r0..(r0 + rows_per_job).min(t);
-                                let mut sc = vec![0f32; rows.len() * per_sub * kv_len];
-                                // SAFETY: AVX2/FMA checked above; `got` outlives the calls, one writer.
+                                let mut sc = vec![0f32; rows.len() * per_sub * job.stride()];
+                                // SAFETY: the kernel's features checked above; `got` outlives the
+                                // calls, one writer.
                                 unsafe {
                                     if simd {
                                         job.run_avx2(rows, &mut sc)
@@ -792,7 +856,7 @@ mod tests {
                         }
                     }
                     let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
-                    assert!(same, "simd {simd}, {per_sub} heads and {rows_per_job} rows per task, {t} rows after {pos}");
+                    assert!(same, "{kernel:?}, {per_sub} heads and {rows_per_job} rows per task, {t} rows after {pos}");
                 }
             }
         }

@@ -1,10 +1,10 @@
-//! The float loops of attention (a query·key dot product, the softmax of a row of scores, the
-//! probability-weighted sum of values), written once as portable code and once with AVX2/FMA
-//! intrinsics that compute the same bits: both use the same operations in the same order. Left to
-//! the auto-vectoriser the dot and the sum came out two floats wide, with the output row going
-//! through memory for every key; the softmax called the C library's `expf` once a score (a sixth of
-//! a planner node's time), whose bits also depend on which C library the robot has and which
-//! variant it picks for the CPU. The FFN's SiLU gate (`silu_gate`) is here too: it takes the same
+//! The float loops of attention (the softmax of a row of scores, the probability-weighted sum of
+//! values; the scores themselves are integer products, [`super::scores`]), written once as portable
+//! code and once with AVX2/FMA intrinsics that compute the same bits: both use the same operations
+//! in the same order. Left to the auto-vectoriser the sum came out two floats wide, with the output
+//! row going through memory for every key; the softmax called the C library's `expf` once a score
+//! (a sixth of a planner node's time), whose bits also depend on which C library the robot has and
+//! which variant it picks for the CPU. The FFN's SiLU gate (`silu_gate`) is here too: it takes the same
 //! exponential.
 
 use super::reduce_lanes;
@@ -14,44 +14,19 @@ use std::arch::x86_64::*;
 /// The loops; the caller's attention code is generic over the implementation, so the AVX2 one
 /// inlines into a function compiled with those features.
 pub trait AttnOps {
-    /// `Σ a·b` (equal lengths): lane `l` accumulates elements `8c + l` with fused multiply-adds,
-    /// the lanes reduce as [`reduce_lanes`], then any tail elements are fused in, in order.
-    ///
-    /// # Safety
-    /// The implementation's CPU features must be present.
-    unsafe fn dot(a: &[f32], b: &[f32]) -> f32;
-
-    /// Eight [`AttnOps::dot`]s of `a` with `b[0..8]`, each the same bits as alone. One dot is a
-    /// single chain of dependent multiply-adds (latency-bound); eight independent chains keep both
-    /// FMA pipes busy, and their lane reductions share their shuffles.
-    ///
-    /// # Safety
-    /// As [`AttnOps::dot`].
-    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8];
-
-    /// Two queries `a`, `b` (equal lengths) against four keys at `keys + k·stride`, k = 0..4:
-    /// `[a·k0, a·k1, a·k2, a·k3, b·k0, …, b·k3]`, each the same bits as [`AttnOps::dot`] alone.
-    /// Both queries take each key from one load, and the keys' addresses are one base and a
-    /// stride: given eight separate slices, the compiler stepped eight pointers through one chain
-    /// of additions inside the loop, and the multiply-adds waited on it.
-    ///
-    /// # Safety
-    /// As [`AttnOps::dot`]; the `a.len()` floats at each `keys + k·stride` must be readable.
-    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8];
-
     /// In place, `row[j] = e_j / Σ e`, where `e_j` is [`exp_le0`] of `row[j] - max(row)` and the sum
     /// runs in eight lanes (lane `l` takes elements `8c + l` in order), reduced as
     /// [`reduce_lanes`], then any tail elements added in order.
     ///
     /// # Safety
-    /// As [`AttnOps::dot`]; `row` is not empty.
+    /// The implementation's CPU features must be present; `row` is not empty.
     unsafe fn softmax(row: &mut [f32]);
 
     /// For every element `e` of `y`: `y[e] = fma(p[j], values[j * stride + e], y[e])` for each `j`
     /// in order.
     ///
     /// # Safety
-    /// As [`AttnOps::dot`]; `values` must hold `(p.len() - 1) * stride + y.len()` floats.
+    /// As [`AttnOps::softmax`]; `values` must hold `(p.len() - 1) * stride + y.len()` floats.
     unsafe fn weighted_sum(y: &mut [f32], p: &[f32], values: &[f32], stride: usize);
 }
 
@@ -113,34 +88,6 @@ pub struct Portable;
 
 impl AttnOps for Portable {
     #[inline(always)]
-    unsafe fn dot(a: &[f32], b: &[f32]) -> f32 {
-        let mut acc = [0f32; 8];
-        let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-        let (ra, rb) = (ca.remainder(), cb.remainder());
-        for (x, y) in ca.zip(cb) {
-            for l in 0..8 {
-                acc[l] = x[l].mul_add(y[l], acc[l]);
-            }
-        }
-        let mut s = reduce_lanes(&acc);
-        for (x, y) in ra.iter().zip(rb) {
-            s = x.mul_add(*y, s);
-        }
-        s
-    }
-
-    #[inline(always)]
-    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
-        b.map(|b| Self::dot(a, b))
-    }
-
-    #[inline(always)]
-    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8] {
-        let key = |k: usize| std::slice::from_raw_parts(keys.add(k * stride), a.len());
-        std::array::from_fn(|i| Self::dot(if i < 4 { a } else { b }, key(i % 4)))
-    }
-
-    #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
         let max = row.iter().fold(f32::NEG_INFINITY, |m, &s| m.max(s));
         let mut acc = [0f32; 8];
@@ -177,23 +124,6 @@ pub struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
 impl Avx2 {
-    /// The lane sums of `a·b[k]` over the whole eight-float chunks (lane `l` takes elements
-    /// `8c + l`, fused in order), and the range of tail elements left for the caller.
-    #[inline(always)]
-    unsafe fn lane_sums<const K: usize>(a: &[f32], b: [&[f32]; K]) -> ([__m256; K], std::ops::Range<usize>) {
-        let n = b.iter().fold(a.len(), |n, b| n.min(b.len()));
-        let mut acc = [_mm256_setzero_ps(); K];
-        let mut c = 0;
-        while c + 8 <= n {
-            let x = _mm256_loadu_ps(a.as_ptr().add(c));
-            for (acc, b) in acc.iter_mut().zip(b) {
-                *acc = _mm256_fmadd_ps(x, _mm256_loadu_ps(b.as_ptr().add(c)), *acc);
-            }
-            c += 8;
-        }
-        (acc, c..n)
-    }
-
     /// [`exp_le0`] of each lane, each operation as there.
     #[inline(always)]
     unsafe fn exp_le0(v: __m256) -> __m256 {
@@ -235,85 +165,10 @@ impl Avx2 {
         silu_gate_portable(&mut g[c..n], &u[c..n]);
     }
 
-    /// The reductions of [`AttnOps::dot`] for eight accumulators side by side (the sums of key
-    /// `k`'s lanes land in lane `k`); every sum has the same two operands as there.
-    #[inline(always)]
-    unsafe fn reduce8(acc: &[__m256; 8]) -> __m256 {
-        // m = lo + hi half of each key: [m(k) | m(k+1)] per pair of keys.
-        let m = |k: usize| {
-            let lo = _mm256_permute2f128_ps::<0x20>(acc[k], acc[k + 1]);
-            let hi = _mm256_permute2f128_ps::<0x31>(acc[k], acc[k + 1]);
-            _mm256_add_ps(lo, hi)
-        };
-        let (m01, m23, m45, m67) = (m(0), m(2), m(4), m(6));
-        // n = (m0 + m2, m1 + m3) of each key: [k0 k2 | k1 k3] and [k4 k6 | k5 k7].
-        let pairs = |x: __m256, y: __m256| {
-            _mm256_add_ps(_mm256_shuffle_ps::<0b01_00_01_00>(x, y), _mm256_shuffle_ps::<0b11_10_11_10>(x, y))
-        };
-        let (n0, n1) = (pairs(m01, m23), pairs(m45, m67));
-        // n0 + n1 of each key: [k0 k2 k4 k6 | k1 k3 k5 k7], then into key order.
-        let r = _mm256_add_ps(_mm256_shuffle_ps::<0b10_00_10_00>(n0, n1), _mm256_shuffle_ps::<0b11_01_11_01>(n0, n1));
-        _mm256_permutevar8x32_ps(r, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7))
-    }
-
-    /// `s` with the tail elements of `a·b` fused in, in order.
-    #[inline(always)]
-    unsafe fn fuse_tail(mut s: f32, a: &[f32], b: &[f32], tail: std::ops::Range<usize>) -> f32 {
-        for e in tail {
-            s = a.get_unchecked(e).mul_add(*b.get_unchecked(e), s);
-        }
-        s
-    }
 }
 
 #[cfg(target_arch = "x86_64")]
 impl AttnOps for Avx2 {
-    #[inline(always)]
-    unsafe fn dot(a: &[f32], b: &[f32]) -> f32 {
-        let ([acc], tail) = Self::lane_sums(a, [b]);
-        // ((l0+l4)+(l2+l6)) + ((l1+l5)+(l3+l7)), as `reduce_lanes`.
-        let s = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
-        let s = _mm_add_ps(s, _mm_movehl_ps(s, s));
-        Self::fuse_tail(_mm_cvtss_f32(_mm_add_ss(s, _mm_shuffle_ps::<1>(s, s))), a, b, tail)
-    }
-
-    #[inline(always)]
-    unsafe fn dot8(a: &[f32], b: [&[f32]; 8]) -> [f32; 8] {
-        let (acc, tail) = Self::lane_sums(a, b);
-        let mut out = [0f32; 8];
-        _mm256_storeu_ps(out.as_mut_ptr(), Self::reduce8(&acc));
-        for (s, b) in out.iter_mut().zip(b) {
-            *s = Self::fuse_tail(*s, a, b, tail.clone());
-        }
-        out
-    }
-
-    #[inline(always)]
-    unsafe fn dot2x4(a: &[f32], b: &[f32], keys: *const f32, stride: usize) -> [f32; 8] {
-        let n = a.len().min(b.len());
-        let k: [*const f32; 4] = std::array::from_fn(|i| keys.add(i * stride));
-        let mut acc = [_mm256_setzero_ps(); 8];
-        let mut c = 0;
-        while c + 8 <= n {
-            let (x, y) = (_mm256_loadu_ps(a.as_ptr().add(c)), _mm256_loadu_ps(b.as_ptr().add(c)));
-            for (i, k) in k.iter().enumerate() {
-                let v = _mm256_loadu_ps(k.add(c));
-                acc[i] = _mm256_fmadd_ps(x, v, acc[i]);
-                acc[4 + i] = _mm256_fmadd_ps(y, v, acc[4 + i]);
-            }
-            c += 8;
-        }
-        let mut out = [0f32; 8];
-        _mm256_storeu_ps(out.as_mut_ptr(), Self::reduce8(&acc));
-        if c < n {
-            for (i, s) in out.iter_mut().enumerate() {
-                let q = if i < 4 { a } else { b };
-                *s = Self::fuse_tail(*s, q, std::slice::from_raw_parts(k[i % 4], n), c..n);
-            }
-        }
-        out
-    }
-
     #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
         let (n, x) = (row.len(), row.as_mut_ptr());

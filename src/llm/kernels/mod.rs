@@ -15,6 +15,7 @@ pub mod avx2;
 pub mod avx512;
 pub mod pool;
 pub mod scalar;
+pub mod scores;
 
 use candle_core::quantized::{GgmlDType, QTensor};
 use candle_core::Device;
@@ -172,7 +173,7 @@ impl PairPtr {
 /// `v.round()` (halves away from zero) for |v| < 2³¹, in plain arithmetic that vectorises: without
 /// SSE4.1 in the baseline, `round()` is a library call per value.
 #[inline(always)]
-fn round_away(v: f32) -> i32 {
+pub(crate) fn round_away(v: f32) -> i32 {
     let a = v.abs();
     let t = (a + 0.5) as i32;
     // a + 0.5 can round up to the next integer (a = 0.49999997): take it back.

@@ -204,35 +204,6 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
     }
     let mut rng = StdRng::seed_from_u64(13);
     for hd in [64, 128, 72, 12] {
-        let (a, b) = (randn(&mut rng, hd), randn(&mut rng, hd));
-        // SAFETY: AVX2 and FMA are present (checked above).
-        let (x, y) = unsafe { (Portable::dot(&a, &b), attn::Avx2::dot(&a, &b)) };
-        assert_eq!(x.to_bits(), y.to_bits(), "dot, hd {hd}");
-        let keys: Vec<Vec<f32>> = (0..8).map(|_| randn(&mut rng, hd)).collect();
-        let eight: [&[f32]; 8] = std::array::from_fn(|k| &keys[k][..]);
-        // SAFETY: as above.
-        let (x8, y8) = unsafe { (Portable::dot8(&a, eight), attn::Avx2::dot8(&a, eight)) };
-        for k in 0..8 {
-            // SAFETY: the portable loop needs no CPU feature.
-            let one = unsafe { Portable::dot(&a, eight[k]) };
-            assert_eq!(one.to_bits(), x8[k].to_bits(), "portable dot8, hd {hd}, key {k}");
-            assert_eq!(one.to_bits(), y8[k].to_bits(), "avx2 dot8, hd {hd}, key {k}");
-        }
-        // Four keys at a stride, two queries: each score as `dot` alone.
-        let stride = hd + 5;
-        let block = randn(&mut rng, 3 * stride + hd);
-        let q2 = randn(&mut rng, hd);
-        // SAFETY: as above; `block` holds the four keys at `stride`.
-        let (x24, y24) = unsafe {
-            (Portable::dot2x4(&a, &q2, block.as_ptr(), stride), attn::Avx2::dot2x4(&a, &q2, block.as_ptr(), stride))
-        };
-        for i in 0..8 {
-            let q = if i < 4 { &a } else { &q2 };
-            // SAFETY: the portable loop needs no CPU feature.
-            let one = unsafe { Portable::dot(q, &block[(i % 4) * stride..][..hd]) };
-            assert_eq!(one.to_bits(), x24[i].to_bits(), "portable dot2x4, hd {hd}, score {i}");
-            assert_eq!(one.to_bits(), y24[i].to_bits(), "avx2 dot2x4, hd {hd}, score {i}");
-        }
         for n in [1, 5, 8, 37, 2000] {
             let row: Vec<f32> = randn(&mut rng, n).iter().map(|x| x * 9.0).collect();
             let (mut x, mut y) = (row.clone(), row.clone());
@@ -256,6 +227,79 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
                 attn::Avx2::weighted_sum(&mut y2, &p, &values, stride);
             }
             assert!(y1.iter().zip(&y2).all(|(a, b)| a.to_bits() == b.to_bits()), "weighted sum, hd {hd}, {keys} keys");
+        }
+    }
+}
+
+/// The integer attention scores: every kernel this CPU has computes the portable definition's
+/// bits, for one to four queries a tile and head widths of 12 to 256; and each score is the f32
+/// query·key product within the rounding, keys with a few channels far above the rest (as
+/// qwen2's key biases make them) included.
+#[test]
+fn tile_scores_every_kernel_equals_the_definition_and_the_float_product() {
+    use super::scores::{tile_scores, KeyTiles, Queries, KEYS};
+    let mut rng = StdRng::seed_from_u64(29);
+    let kernels: Vec<Kernel> = [Kernel::Avx2, Kernel::Avx512]
+        .into_iter()
+        .filter(|k| match k {
+            Kernel::Avx2 => avx2::available(),
+            _ => avx512::available(),
+        })
+        .collect();
+    if kernels.len() < 2 {
+        eprintln!("only {kernels:?} of the SIMD score kernels checked: this CPU has no more");
+    }
+    for hd in [16, 64, 80, 128, 12, 256] {
+        let (nkv, positions) = (2, 40);
+        let shape = KeyTiles { nkv, hd };
+        assert!(KeyTiles::fits(hd));
+        let (ne, ns) = shape.sizes(positions);
+        let (mut tiles, mut scales) = (vec![0i16; ne], vec![0f32; ns]);
+        // Two channels 60 times the others in every key.
+        let keys: Vec<Vec<f32>> = (0..positions * nkv)
+            .map(|_| randn(&mut rng, hd).into_iter().enumerate().map(|(e, x)| if e == 3 || e == hd / 2 + 3 { 60.0 + x } else { x }).collect())
+            .collect();
+        for p in 0..positions {
+            for h in 0..nkv {
+                shape.store(&mut tiles, &mut scales, p, h, &keys[p * nkv + h]);
+            }
+        }
+        let raw = randn(&mut rng, 4 * hd);
+        let scale = 1.0 / (hd as f32).sqrt();
+        let mut queries = Queries::default();
+        queries.quantize(&raw, hd, scale);
+        let qs: Vec<_> = (0..4).map(|i| queries.get(i)).collect();
+        for h in 0..nkv {
+            for p0 in (0..positions).step_by(KEYS) {
+                let t = shape.tile(p0, h);
+                let tile = &tiles[t * shape.tile_len()..][..shape.tile_len()];
+                let sc = &scales[t * KEYS..][..KEYS];
+                for n in 1..=4 {
+                    let mut want = vec![0f32; n * KEYS];
+                    let out: Vec<*mut f32> = (0..n).map(|u| want[u * KEYS..].as_mut_ptr()).collect();
+                    // SAFETY: each pointer has KEYS floats after it.
+                    unsafe { tile_scores(Kernel::Scalar, shape, tile, sc, &qs[..n], &out) };
+                    for &k in &kernels {
+                        let mut got = vec![f32::NAN; n * KEYS];
+                        let out: Vec<*mut f32> = (0..n).map(|u| got[u * KEYS..].as_mut_ptr()).collect();
+                        // SAFETY: `kernels` holds only what this CPU runs; KEYS floats after each pointer.
+                        unsafe { tile_scores(k, shape, tile, sc, &qs[..n], &out) };
+                        let same = want.iter().zip(&got).all(|(a, b)| a.to_bits() == b.to_bits());
+                        assert!(same, "{k:?}, hd {hd}, {n} queries, tile at {p0}");
+                    }
+                    for u in 0..n {
+                        for s in 0..KEYS.min(positions - p0) {
+                            let (q, k) = (&raw[u * hd..][..hd], &keys[(p0 + s) * nkv + h]);
+                            let exact: f32 = q.iter().zip(k).map(|(a, b)| a * b).sum::<f32>() * scale;
+                            // The query's rounding, against the part of the key off the outliers.
+                            let bulk = k.iter().enumerate().filter(|&(e, _)| e != 3 && e != hd / 2 + 3).map(|(_, b)| b * b).sum::<f32>().sqrt();
+                            let size = q.iter().map(|a| a * a).sum::<f32>().sqrt() * (bulk + 120.0) * scale;
+                            let err = (want[u * KEYS + s] - exact).abs();
+                            assert!(err <= 0.004 * size, "hd {hd}: score {} against {exact} (size {size})", want[u * KEYS + s]);
+                        }
+                    }
+                }
+            }
         }
     }
 }
