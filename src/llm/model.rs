@@ -59,7 +59,7 @@ impl ModelConfig {
         if !KeyTiles::fits(head_dim) {
             return Err(bad(
                 "attention.head_count",
-                format!("a head width of {head_dim} ({n_embd} / {n_head} heads): attention needs a multiple of 4"),
+                format!("a head width of {head_dim} ({n_embd} / {n_head} heads): attention takes a multiple of 4 up to 512"),
             ));
         }
         if let Some(rope_dim) = md.opt_u32(&key("rope.dimension_count"))? {
