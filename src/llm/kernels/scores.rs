@@ -10,7 +10,7 @@
 //! Why 16-bit keys: with 8 bits (one scale per 32 elements) Qwen2.5's logits moved 20 times
 //! further from candle's than the matrices' own 8-bit rounding moves them (normalised squared
 //! error 4.3e-2): qwen2's key biases put a few channels far above the others in every key, and
-//! one scale per key leaves the rest a handful of steps. At 15 bits they keep hundreds.
+//! a scale set by them leaves the rest a handful of 8-bit steps. At 15 bits they keep hundreds.
 //!
 //! Range: a query element is at most [`QMAX`] (511, or less for heads wider than 128) and a key
 //! element 32767, so a head's sum stays inside an i32.
