@@ -41,6 +41,11 @@ pub struct ModelConfig {
 }
 
 impl ModelConfig {
+    /// The shape of each layer's tiled keys.
+    pub(crate) fn key_tiles(&self) -> KeyTiles {
+        KeyTiles { nkv: self.n_head_kv, hd: self.head_dim }
+    }
+
     /// Reads the configuration from a validated GGUF file's `<arch>.*` metadata.
     pub fn from_gguf(gguf: &GgufFile) -> Result<Self> {
         let md = gguf.metadata();
@@ -314,7 +319,7 @@ impl Transformer {
     /// Replaces the cache by `n` positions that `fill` writes, slice by slice in the order of
     /// [`Transformer::cache_slices`]. On an error the cache is left empty.
     pub fn restore_cache<E>(&mut self, n: usize, mut fill: impl FnMut(&mut [f32]) -> std::result::Result<(), E>) -> std::result::Result<(), E> {
-        let shape = self.key_tiles();
+        let shape = self.cfg.key_tiles();
         let w = shape.nkv * shape.hd;
         self.truncate(0);
         for l in &mut self.layers {
@@ -327,10 +332,6 @@ impl Transformer {
             l.cache.len = n;
         }
         Ok(())
-    }
-
-    fn key_tiles(&self) -> KeyTiles {
-        KeyTiles { nkv: self.cfg.n_head_kv, hd: self.cfg.head_dim }
     }
 
     /// Forgets every cached position from `len` on (prefix reuse: keep the shared part).
@@ -414,7 +415,7 @@ impl Transformer {
         }
         rope_table(&self.inv_freq, pos, t, &mut s.rope);
         for layer in &mut self.layers {
-            layer.cache.reserve(pos + t, KeyTiles { nkv: cfg.n_head_kv, hd: cfg.head_dim });
+            layer.cache.reserve(pos + t, cfg.key_tiles());
             layer.cache.len = pos;
             let h = fit(&mut h_buf, t * d);
             rms_norm(x, &layer.attn_norm, eps, h);
@@ -468,7 +469,7 @@ impl Layer {
         }
         self.cache.k[pos * kvw..(pos + t) * kvw].copy_from_slice(k);
         self.cache.v[pos * kvw..(pos + t) * kvw].copy_from_slice(v);
-        let shape = KeyTiles { nkv, hd };
+        let shape = cfg.key_tiles();
         self.cache.tile_keys(pos, pos + t, shape);
         self.cache.len = pos + t;
         let scale = 1.0 / (hd as f32).sqrt();

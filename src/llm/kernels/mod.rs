@@ -202,11 +202,19 @@ unsafe fn quantize_block_avx2(xs: &[f32]) -> Q8Block {
     quantize_block_with(xs)
 }
 
+/// The scale `d = max|x| / top` of a symmetric quantisation of `xs` to `-top..=top`, and its
+/// inverse (0 for an all-zero input): the rule of the activation blocks, the attention keys and
+/// the queries alike.
+#[inline(always)]
+pub(crate) fn symmetric_scale(xs: &[f32], top: f32) -> (f32, f32) {
+    let amax = xs.iter().fold(0f32, |m, x| m.max(x.abs()));
+    let d = amax / top;
+    (d, if d > 0.0 { 1.0 / d } else { 0.0 })
+}
+
 #[inline(always)]
 fn quantize_block_with(xs: &[f32]) -> Q8Block {
-    let amax = xs.iter().fold(0f32, |m, x| m.max(x.abs()));
-    let d = amax / 127.0;
-    let id = if d > 0.0 { 1.0 / d } else { 0.0 };
+    let (d, id) = symmetric_scale(xs, 127.0);
     let mut qs = [0i8; QK];
     let mut sum = 0i32;
     for (q, &x) in qs.iter_mut().zip(xs) {

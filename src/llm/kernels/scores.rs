@@ -22,7 +22,7 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-use super::{round_away, Kernel};
+use super::{round_away, symmetric_scale, Kernel};
 
 /// Positions per tile.
 pub const KEYS: usize = 16;
@@ -72,9 +72,7 @@ impl KeyTiles {
     pub fn store(self, keys: &mut [i16], scales: &mut [f32], p: usize, h: usize, x: &[f32]) {
         debug_assert_eq!(x.len(), self.hd);
         let (t, s) = (self.tile(p, h), p % KEYS);
-        let amax = x.iter().fold(0f32, |m, v| m.max(v.abs()));
-        let d = amax / KMAX;
-        let id = if d > 0.0 { 1.0 / d } else { 0.0 };
+        let (d, id) = symmetric_scale(x, KMAX);
         scales[t * KEYS + s] = d;
         let tile = &mut keys[t * self.tile_len()..][..self.tile_len()];
         for (e, &v) in x.iter().enumerate() {
@@ -108,9 +106,7 @@ impl Queries {
         self.q.resize(n * hd, 0);
         self.w.resize(n, 0.0);
         for (i, xs) in x.chunks_exact(hd).enumerate() {
-            let amax = xs.iter().fold(0f32, |m, v| m.max(v.abs()));
-            let d = amax / top as f32;
-            let id = if d > 0.0 { 1.0 / d } else { 0.0 };
+            let (d, id) = symmetric_scale(xs, top as f32);
             for (q, &v) in self.q[i * hd..][..hd].iter_mut().zip(xs) {
                 *q = round_away(v * id).clamp(-top, top) as i16;
             }
