@@ -1076,6 +1076,18 @@ fn each_decision_is_shown_its_steps_with_what_they_would_make_true() {
 }
 
 #[test]
+fn the_previous_step_says_a_closeness_once() {
+    let mut m = Scripted::new(&["action: [WALK] <television> (31)", "action: [SWITCHON] <television> (31)", "done"]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    plan(&mut m, &mut env, &offered(&["television is ON"]), &defaults(), &mut TraceWriter::sink());
+    let said = m.prompts.iter().find_map(|p| p.lines().find(|l| l.starts_with("Previous step: [WALK] <television> (31)")).map(str::to_string));
+    let said = said.unwrap_or_else(|| panic!("no prompt after the walk: {:?}", m.prompts.last()));
+    // The world holds the closeness both ways; the report says it once.
+    assert!(said.contains("character is CLOSE to television"), "{said}");
+    assert!(!said.contains("television is CLOSE to character"), "{said}");
+}
+
+#[test]
 fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again_once() {
     use crate::world::vocab::{Relation, State};
     let closed = "fridge is CLOSED";
