@@ -22,6 +22,7 @@ use super::decompose::Proposed;
 use super::goals::{self, Goals};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter};
+use super::rules::new_facts;
 use super::terminate::echoes;
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
@@ -30,7 +31,7 @@ use crate::action::Action;
 use crate::grammar::{ActionSet, Proposal, Verdict};
 use crate::llm::engine::{Generate, Prompt, StopReason, Warm, WarmSource};
 use crate::llm::LlmError;
-use crate::world::{Fact, Relation, World};
+use crate::world::{Fact, World};
 
 /// How the context of each decision is made (the paper's ablations).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -619,20 +620,9 @@ impl Run<'_> {
     }
 
     /// What the last step changed, in the goal lines' words (`None`: nothing, or no world to say it).
-    /// Closeness is said once a pair ("character is CLOSE to fridge", not its mirror too), and an
-    /// object's relation to itself not at all: every word here is prefilled at the next decision.
     pub(super) fn last_change_words(&self) -> Option<Vec<String>> {
         let w = self.env.world().filter(|_| !self.last_change.is_empty())?;
-        let said = |i: usize| match self.last_change[i] {
-            Fact::Edge { from, to, .. } if from == to => true,
-            Fact::Edge { from, relation: Relation::Close, to } => self.last_change[..i]
-                .iter()
-                .any(|f| matches!(*f, Fact::Edge { from: a, relation: Relation::Close, to: b } if a == to && b == from)),
-            _ => false,
-        };
-        let words: Vec<String> =
-            (0..self.last_change.len()).filter(|&i| !said(i)).map(|i| w.describe(&self.last_change[i])).collect();
-        Some(words).filter(|w| !w.is_empty())
+        Some(self.last_change.iter().map(|f| w.describe(f)).collect())
     }
 
     /// The symbolic check, then the executor. `Ok(Ok(summary))`: executed; `Ok(Err(reason))`: the
@@ -660,7 +650,7 @@ impl Run<'_> {
                 self.executed.push(a.clone());
                 self.set_status(child, Status::Executed, outcome.summary());
                 self.last_change = match (&before, self.env.world()) {
-                    (Some(before), Some(w)) => w.facts_among(&ids).into_iter().filter(|f| !before.contains(f)).collect(),
+                    (Some(before), Some(w)) => new_facts(w.character(), w.facts_among(&ids), |f| before.contains(f)),
                     _ => Vec::new(),
                 };
                 if let Some(facts) = self.last_change_words() {

@@ -127,17 +127,23 @@ pub(super) fn recent(executed: &[Action]) -> &[Action] {
     &executed[executed.len().saturating_sub(RECENT)..]
 }
 
-/// The facts among `a`'s objects and the robot that hold `after` it and not `now`, closeness only
-/// as the robot's (the object's mirror of it says nothing more).
+/// The facts among `a`'s objects and the robot that hold `after` it and not `now` (see
+/// [`new_facts`]).
 pub(super) fn gained(now: &World, after: &World, a: &Action) -> Vec<Fact> {
     let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
-    let robot = now.character();
-    after
-        .facts_among(&ids)
-        .into_iter()
-        .filter(|f| !now.holds(f))
-        .filter(|f| !matches!(f, Fact::Edge { from, relation: Relation::Close, .. } if *from != robot))
-        .collect()
+    new_facts(now.character(), after.facts_among(&ids), |f| now.holds(f))
+}
+
+/// The facts of `then` that did not hold before (`held`), as the rules and a step's report both
+/// say them: closeness only as the robot's (its mirror, or two objects put side by side, says
+/// nothing a goal line asks), and no object's relation to itself.
+pub(super) fn new_facts(robot: u32, then: Vec<Fact>, held: impl Fn(&Fact) -> bool) -> Vec<Fact> {
+    let said = |f: &Fact| match *f {
+        Fact::Edge { from, to, .. } if from == to => false,
+        Fact::Edge { from, relation: Relation::Close, .. } => from == robot,
+        _ => true,
+    };
+    then.into_iter().filter(|f| !held(f) && said(f)).collect()
 }
 
 /// Whether the state `after` a target's way holds a fact among the target's objects that does not

@@ -1088,6 +1088,26 @@ fn the_previous_step_says_a_closeness_once() {
 }
 
 #[test]
+fn the_previous_step_says_no_closeness_between_two_objects() {
+    let mut m = Scripted::new(&[
+        "action: [WALK] <apple> (12)",
+        "action: [GRAB] <apple> (12)",
+        "action: [WALK] <fridge> (10)",
+        "action: [OPEN] <fridge> (10)",
+        "action: [PUTIN] <apple> (12) <fridge> (10)",
+        "done",
+    ]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    plan(&mut m, &mut env, &offered(&[APPLE_IN_FRIDGE]), &defaults(), &mut TraceWriter::sink());
+    let said = m.prompts.iter().find_map(|p| p.lines().find(|l| l.starts_with("Previous step: [PUTIN]")).map(str::to_string));
+    let said = said.unwrap_or_else(|| panic!("no prompt after the put: {:?}", m.prompts.last()));
+    // The put sets the apple inside the fridge and, in the world, the two close to each other: a
+    // closeness no goal line asks for, so not said.
+    assert!(said.contains("apple is INSIDE to fridge"), "{said}");
+    assert!(!said.contains("apple is CLOSE") && !said.contains("fridge is CLOSE"), "{said}");
+}
+
+#[test]
 fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again_once() {
     use crate::world::vocab::{Relation, State};
     let closed = "fridge is CLOSED";
