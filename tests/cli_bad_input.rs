@@ -298,3 +298,14 @@ fn an_instruction_naming_an_object_the_scene_lacks_is_warned_about_and_reported(
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(v["unknown_objects"], serde_json::json!([]));
 }
+
+#[test]
+fn a_blank_instruction_is_an_error_before_the_model_loads() {
+    for blank in ["", "   "] {
+        for args in [&["plan", blank][..], &["bench", "nodes", "--instruction", blank]] {
+            let o = run(&[args, &["-m", "/nonexistent.gguf"][..]].concat());
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+            assert!(stderr(&o).contains("the instruction is empty"), "{args:?}: {}", stderr(&o));
+        }
+    }
+}

@@ -129,6 +129,9 @@ struct NodesReport {
 
 pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     let t0 = Instant::now();
+    if let Some(instr) = &a.instruction {
+        super::plan::nonempty(instr)?;
+    }
     let path = resolve_model(&a.model)?;
     a.inference.apply();
     let mut engine = Engine::load(&path)?;

@@ -263,7 +263,7 @@ fn request(
     oracle: bool,
 ) -> anyhow::Result<PlanRequest> {
     let instruction = match (instruction, task) {
-        (Some(i), _) => i.to_string(),
+        (Some(i), _) => nonempty(i)?.to_string(),
         (None, Some(t)) => format!("{}. {}", t.title.trim_end_matches('.'), t.description),
         (None, None) => bail!("say what to do: step plan \"put the apple in the fridge\" (or --task ID)"),
     };
@@ -279,6 +279,14 @@ fn request(
         req.oracle = Some(Box::new(move |w: &World| goal.check(w, &[]).all_met()));
     }
     Ok(req)
+}
+
+/// The instruction, unless it is blank (there would be nothing to plan for).
+pub(crate) fn nonempty(instruction: &str) -> anyhow::Result<&str> {
+    if instruction.trim().is_empty() {
+        bail!("the instruction is empty: say what to do, e.g. step plan \"put the apple in the fridge\"");
+    }
+    Ok(instruction)
 }
 
 /// The engine, with the grammar compiler's free-text slice (subgoals and reasons are free text).

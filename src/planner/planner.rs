@@ -18,7 +18,7 @@ use rand::SeedableRng;
 use serde_json::json;
 use sha2::{Digest, Sha256};
 
-use super::decompose::Proposed;
+use super::decompose::{named_objects, Proposed};
 use super::goals::{self, Goals};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter};
@@ -212,13 +212,20 @@ impl Run<'_> {
         }
         let Ok(focus) = self.node_focus(self.tree.root()) else { return };
         let Some(w) = self.env.world() else { return };
+        let instruction = self.tree.node(self.tree.root()).text.clone();
+        // An instruction that names nothing of a whole scene ("do the chores") would have the
+        // model score a line for every state of every object: minutes of prefill on a small
+        // scene, for a choice nothing in the instruction informs. The root proposes steps instead.
+        if self.focus_is_scene && named_objects(w, &self.focus, &instruction).is_empty() {
+            self.trace.event("goal_candidates", json!({"lines": [], "why": "the instruction names no object of the scene"}));
+            return;
+        }
         let objects = focus.iter().filter(|&&id| id != w.character()).count();
         if objects > goals::MAX_GOAL_OBJECTS {
             self.trace.event("goal_candidates", json!({"lines": [], "why": format!(
                 "{objects} objects: more than {} to set goals over", goals::MAX_GOAL_OBJECTS)}));
             return;
         }
-        let instruction = self.tree.node(self.tree.root()).text.clone();
         let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
         let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named);
         if candidates.is_empty() {

@@ -1181,6 +1181,24 @@ fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
 }
 
 #[test]
+fn an_instruction_that_names_no_object_of_the_scene_sets_no_goals_over_all_of_it() {
+    // Every state of every object of the kitchen would be a line to score: the root proposes
+    // steps instead, as without the flag.
+    let mut m = Scripted::new(&["action: [WALK] <fridge> (10)", "done"]);
+    let cfg = PlannerConfig { infer_goals: true, ..defaults() };
+    let req = PlanRequest::new("do the chores", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done);
+    assert!(m.scored.is_empty(), "{:?}", m.scored);
+    assert!(m.grammars[0].contains("[WALK]") && !m.prompts[0].contains("Goals you can set"), "{}", m.prompts[0]);
+    // Naming one object of it keeps goal setting, over what it names.
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: television is ON".to_string(), "done".to_string()].into();
+    plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &PlanRequest::new("the television", vec![]), &cfg, &mut TraceWriter::sink());
+    assert!(m.scored_prompts.first().is_some_and(|p| p.contains("Goals you can set:\ntelevision is ON")), "{:?}", m.scored_prompts);
+}
+
+#[test]
 fn a_goal_line_that_repeats_the_instructions_first_word_is_still_taken() {
     // "WATCH" under "Watch the television": a line is congruent by construction; the echo check
     // (for subgoals the model writes) once rejected it, and the line was lost.
