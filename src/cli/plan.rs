@@ -19,6 +19,7 @@ use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
 use crate::llm::sample::Sampling;
 use crate::planner::replay::{compare, read_trace};
 use crate::planner::tree::write_dot;
+use crate::planner::bridge::BridgeEnv;
 use crate::planner::{
     plan, Budgets, DryRunEnv, Env, PlanOutcome, PlanRequest, PlannerConfig, PlannerKind, SimEnv,
     StopCause, TraceWriter,
@@ -53,9 +54,14 @@ pub struct PlanArgs {
     /// Grammar strength: format | typed | feasible.
     #[arg(long, default_value = "feasible")]
     pub grammar: String,
-    /// Executor: sim (the symbolic world, closed loop) | dry-run (no feedback).
+    /// Executor: sim (the symbolic world, closed loop) | dry-run (no feedback) | bridge:CMD (a robot
+    /// behind the command CMD, run by `sh -c`: one JSON action a line on its stdin, one JSON outcome a
+    /// line on its stdout; see the README's "Robot bridge").
     #[arg(long, default_value = "sim")]
     pub env: String,
+    /// Seconds a robot bridge has to answer one action; past it the run stops with a timeout error.
+    #[arg(long, default_value_t = BridgeEnv::DEFAULT_TIMEOUT.as_secs_f64(), value_parser = positive_seconds)]
+    pub action_timeout: f64,
     /// Deepest subgoal level below the instruction.
     #[arg(long, default_value_t = Budgets::default().max_depth)]
     pub max_depth: usize,
@@ -140,11 +146,25 @@ fn load_scene(scene: &Value) -> anyhow::Result<(World, Option<Task>)> {
     }
 }
 
-fn make_env(name: &str, world: World, focus: Vec<u32>) -> anyhow::Result<Box<dyn Env>> {
+fn make_env(name: &str, world: World, focus: Vec<u32>, timeout: Duration) -> anyhow::Result<Box<dyn Env>> {
     match name {
         "sim" => Ok(Box::new(SimEnv::new(world, focus))),
         "dry-run" => Ok(Box::new(DryRunEnv::new(world, focus))),
-        other => bail!("unknown executor '{other}': choose sim or dry-run"),
+        other => match BridgeEnv::command_of(other) {
+            Some(command) => Ok(Box::new(BridgeEnv::spawn(command, world, focus, timeout)?)),
+            None if other.starts_with("bridge:") => {
+                bail!("--env bridge: needs the robot's command after the colon, e.g. --env \"bridge:./robot.py\"")
+            }
+            None => bail!("unknown executor '{other}': choose sim, dry-run or bridge:CMD"),
+        },
+    }
+}
+
+/// A number of seconds above zero.
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() => Ok(x),
+        _ => Err(format!("'{s}' is not a number of seconds above 0 (e.g. 60)")),
     }
 }
 
@@ -306,7 +326,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !unknown.is_empty() {
         eprintln!("warning: {}", unknown_note(&unknown, &world));
     }
-    let mut env = make_env(&args.env, world, req.focus.clone())?;
+    let mut env = make_env(&args.env, world, req.focus.clone(), Duration::from_secs_f64(args.action_timeout))?;
     let path = resolve_model(&args.model)?;
     let mut engine = load_engine(&path, &args.inference)?;
     let mut trace = match &args.trace {
@@ -462,7 +482,14 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     req.kept = header_list(r, "kept", "kept goals", &args.trace)?;
     req.named_verbs = header_list(r, "named_verbs", "named verbs", &args.trace)?;
     let env_name = h["env"].as_str().unwrap_or("sim");
-    let mut env = make_env(env_name, world, req.focus.clone())?;
+    if env_name.starts_with("bridge:") {
+        bail!(
+            "{} ran on a robot bridge ({env_name}): replaying it would move the robot again; replay checks \
+             runs on the simulator (sim) or dry-run",
+            args.trace.display()
+        );
+    }
+    let mut env = make_env(env_name, world, req.focus.clone(), BridgeEnv::DEFAULT_TIMEOUT)?;
     let model = match &args.model {
         Some(m) => resolve_model(m)?,
         None => PathBuf::from(

@@ -30,8 +30,6 @@ use super::env::{world_step, Env, EnvError, Outcome};
 use crate::action::Action;
 use crate::world::World;
 
-/// The default time a robot has to answer one action.
-pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// Bytes of the child's stderr kept for error messages.
 const STDERR_TAIL: usize = 2048;
@@ -75,6 +73,9 @@ pub struct BridgeEnv {
 }
 
 impl BridgeEnv {
+    /// The default time a robot has to answer one action.
+    pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(60);
+
     /// Parses `--env` values of the form `bridge:CMD` (CMD run by `sh -c`).
     pub fn command_of(spec: &str) -> Option<&str> {
         spec.strip_prefix("bridge:").map(str::trim).filter(|c| !c.is_empty())
@@ -413,7 +414,7 @@ for line in sys.stdin:
         assert_eq!(BridgeEnv::command_of("bridge: ./robot --port 3"), Some("./robot --port 3"));
         assert_eq!(BridgeEnv::command_of("bridge:"), None);
         assert_eq!(BridgeEnv::command_of("sim"), None);
-        assert!(matches!(BridgeEnv::spawn("  ", World::demo(), vec![], DEFAULT_TIMEOUT), Err(EnvError::Spawn { .. })));
+        assert!(matches!(BridgeEnv::spawn("  ", World::demo(), vec![], BridgeEnv::DEFAULT_TIMEOUT), Err(EnvError::Spawn { .. })));
         // `sh` starts, the command does not exist: the first action reports the crash.
         let mut b = bridge("/nonexistent/robot-bridge", 10_000);
         let e = b.execute(&walk(1, "kitchen")).unwrap_err();

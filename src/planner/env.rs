@@ -43,11 +43,11 @@ impl Outcome {
 /// An executor that could not be asked at all (as opposed to an action that failed).
 #[derive(Debug, thiserror::Error)]
 pub enum EnvError {
-    #[error("the executor crashed or closed its pipe after being sent {sent:?}: {detail}")]
+    #[error("the executor crashed or closed its pipe after being sent `{sent}`: {detail}")]
     Crashed { sent: String, detail: String },
-    #[error("the executor did not answer {sent:?} within {timeout_ms} ms")]
+    #[error("the executor did not answer `{sent}` within {timeout_ms} ms")]
     Timeout { sent: String, timeout_ms: u64 },
-    #[error("the executor answered {received:?} to {sent:?}, which is not an outcome: {detail}")]
+    #[error("the executor answered {received:?} to `{sent}`, which is not an outcome: {detail}")]
     Garbage { sent: String, received: String, detail: String },
     #[error("could not start the executor {command:?}: {detail}")]
     Spawn { command: String, detail: String },
