@@ -370,7 +370,7 @@ impl Run<'_> {
         if dg.allow_done {
             answers.push("done".to_string());
         }
-        let best = self.best_scored(node, prompt, &answers, |s| s.logprob, json!({"whole": true}))?;
+        let best = self.best_scored("choose", node, prompt, &answers, |s| s.logprob, json!({"whole": true}))?;
         Ok(answers.swap_remove(best))
     }
 
@@ -383,14 +383,16 @@ impl Run<'_> {
             return Ok(written);
         }
         let lines: Vec<String> = list.iter().map(|a| format!("action: {a}")).collect();
-        let best = self.best_scored(node, prompt, &lines, Score::mean, json!({"written": format!("action: {written}")}))?;
+        let best = self.best_scored("score", node, prompt, &lines, Score::mean, json!({"written": format!("action: {written}")}))?;
         Ok(list[best].clone())
     }
 
     /// One scoring call over `answers`: the index of the best by `key` (the first on a tie),
-    /// recorded as a call and traced with the top five (and `fields`).
+    /// recorded as a call of `role` and traced with the top five (and `fields`). `choose`: the
+    /// scores are the decision itself; `score`: they rank what a decomposition call wrote.
     fn best_scored(
         &mut self,
+        role: &'static str,
         node: NodeId,
         prompt: &Prompt,
         answers: &[String],
@@ -401,7 +403,7 @@ impl Run<'_> {
         let hash = prompt_hash(prompt, &answers.join("\n"));
         let t = Instant::now();
         let scoring = self.model.score(prompt, answers).map_err(|e| {
-            self.trace.event("call_error", json!({"role": "score", "node": node, "prompt_hash": hash,
+            self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,
                 "kind": "error", "error": e.to_string()}));
             StopCause::Error(format!("score call at node {node}: {e}"))
         })?;
@@ -413,7 +415,7 @@ impl Run<'_> {
                 best = i;
             }
         }
-        self.record(CallRecord::of_scoring("score", node, hash, &scoring, &answers[best], total_ms));
+        self.record(CallRecord::of_scoring(role, node, hash, &scoring, &answers[best], total_ms));
         let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(key).zip(answers.iter().map(String::as_str)).collect();
         top.sort_by(|a, b| b.0.total_cmp(&a.0));
         fields["node"] = json!(node);

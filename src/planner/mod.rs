@@ -450,12 +450,13 @@ impl CallRecord {
     }
 
     /// Whether this call begins a new decision, after a call of role `previous`: a decision is a
-    /// done check (where `done` may be answered), the decomposition call that proposes a node,
-    /// and the calls that judge or score the proposal. Latency "per node" is per decision.
+    /// done check (where `done` may be answered), the call that proposes a node (a decomposition,
+    /// or `choose`: the likeliest of whole answers, as the root sets its goal lines), and the calls
+    /// that judge or score the proposal. Latency "per node" is per decision.
     pub fn starts_decision(&self, previous: Option<&str>) -> bool {
         match self.role {
             "done_check" => true,
-            "decompose" | "flat" => previous != Some("done_check"),
+            "decompose" | "flat" | "choose" => previous != Some("done_check"),
             _ => previous.is_none(),
         }
     }

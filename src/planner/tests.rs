@@ -1175,6 +1175,9 @@ fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
     let second = &m.scored[1];
     assert!(second.last().is_some_and(|a| a == "done") && !second.contains(&format!("subgoal: {open}")), "{second:?}");
     assert_eq!(out.tree.node(0).history.last().unwrap().1, "the model said done after setting its goals");
+    // The root's two choices are two decisions (the line's one decomposition between them).
+    let roles: Vec<&str> = CallRecord::decisions(&out.stats.calls).iter().map(|c| c.role).collect();
+    assert_eq!(roles, ["choose", "decompose", "choose"]);
     // Without the flag the root proposes actions, and no goal lines.
     let (_, m) = run(&["done"], &defaults());
     assert!(!m.grammars[0].contains(&format!("\"{open}\"")) && m.grammars[0].contains("[WALK]"), "{}", m.grammars[0]);
@@ -1258,7 +1261,7 @@ fn below_a_line_the_model_set_only_the_steps_that_make_it_true_are_offered() {
 /// scored it; a done check that answered `done` is a decision of its own.
 #[test]
 fn calls_group_into_decisions() {
-    let roles = ["decompose", "terminate", "done_check", "decompose", "score", "done_check", "decompose", "done_check"];
+    let roles = ["decompose", "terminate", "done_check", "decompose", "score", "done_check", "decompose", "done_check", "choose", "choose"];
     let mut starts = Vec::new();
     let mut previous = None;
     for (i, role) in roles.into_iter().enumerate() {
@@ -1282,5 +1285,9 @@ fn calls_group_into_decisions() {
         }
         previous = Some(role);
     }
-    assert_eq!(starts, [0, 2, 5, 7]);
+    // A choice among whole answers (the root setting its goal lines) proposes as a decomposition
+    // does: after a done check it is that decision's proposal; after another choice it is a
+    // decision of its own (its line's steps ran between them without a call, and the two were
+    // once counted as one node).
+    assert_eq!(starts, [0, 2, 5, 7, 9]);
 }
