@@ -17,9 +17,9 @@ use crate::eval::TaskSource;
 use crate::llm::engine::{Engine, Warm, WarmSource};
 use crate::llm::locate::{resolve_model, DEFAULT_MODEL};
 use crate::llm::sample::Sampling;
+use crate::planner::bridge::BridgeEnv;
 use crate::planner::replay::{compare, read_trace};
 use crate::planner::tree::write_dot;
-use crate::planner::bridge::BridgeEnv;
 use crate::planner::{
     plan, Budgets, DryRunEnv, Env, PlanOutcome, PlanRequest, PlannerConfig, PlannerKind, SimEnv,
     StopCause, TraceWriter,

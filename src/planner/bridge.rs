@@ -30,7 +30,6 @@ use super::env::{world_step, Env, EnvError, Outcome};
 use crate::action::Action;
 use crate::world::World;
 
-
 /// Bytes of the child's stderr kept for error messages.
 const STDERR_TAIL: usize = 2048;
 

@@ -214,8 +214,8 @@ impl Run<'_> {
         let Some(w) = self.env.world() else { return };
         let instruction = self.tree.node(self.tree.root()).text.clone();
         // An instruction that names nothing of a whole scene ("do the chores") would have the
-        // model score a line for every state of every object: minutes of prefill on a small
-        // scene, for a choice nothing in the instruction informs. The root proposes steps instead.
+        // model score a line for every state of every object: about a minute of prefill on the
+        // demo kitchen, for a choice nothing in the instruction informs. The root proposes steps.
         if self.focus_is_scene && named_objects(w, &self.focus, &instruction).is_empty() {
             self.trace.event("goal_candidates", json!({"lines": [], "why": "the instruction names no object of the scene"}));
             return;
