@@ -309,3 +309,15 @@ fn a_blank_instruction_is_an_error_before_the_model_loads() {
         }
     }
 }
+
+#[test]
+fn deadline_and_action_timeout_are_seconds_above_zero() {
+    // `--deadline nan` once reached Duration::from_secs_f64 and panicked.
+    for flag in ["--deadline", "--action-timeout"] {
+        for bad in ["nan", "inf", "0", "-1", "soon"] {
+            let o = run(&["plan", "put the apple in the fridge", &format!("{flag}={bad}"), "-m", "/nonexistent.gguf"]);
+            assert_eq!(o.status.code(), Some(2), "{flag}={bad}: {}", stderr(&o));
+            assert!(stderr(&o).contains("not a number of seconds above 0"), "{flag}={bad}: {}", stderr(&o));
+        }
+    }
+}

@@ -75,7 +75,7 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = Budgets::default().max_actions)]
     pub max_actions: usize,
     /// Wall-clock limit in seconds.
-    #[arg(long)]
+    #[arg(long, value_parser = positive_seconds)]
     pub deadline: Option<f64>,
     /// Do not check execute verdicts against the world before executing them.
     #[arg(long)]

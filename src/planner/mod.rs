@@ -627,7 +627,13 @@ impl PlannerConfig {
                 max_replans: usize_of(b, "max_replans")?.unwrap_or(d.max_replans),
                 max_llm_calls: usize_of(b, "max_llm_calls")?.unwrap_or(d.max_llm_calls),
                 max_actions: usize_of(b, "max_actions")?.unwrap_or(d.max_actions),
-                deadline: b.get("deadline").and_then(Value::as_f64).map(Duration::from_secs_f64),
+                deadline: match b.get("deadline").and_then(Value::as_f64) {
+                    Some(s) => Some(
+                        Duration::try_from_secs_f64(s)
+                            .map_err(|_| format!("budgets.deadline: {s} is not a number of seconds of 0 or more"))?,
+                    ),
+                    None => None,
+                },
             };
         }
         if let Some(x) = v.get("symbolic_check").and_then(Value::as_bool) {
