@@ -26,20 +26,20 @@ fn tiny_model(dir: &Path) -> PathBuf {
     p
 }
 
-/// `step plan` on the demo kitchen with the robot `robot` (a shell command), its trace in `dir`.
-fn plan_with(dir: &Path, model: &Path, robot: &str, extra: &[&str]) -> (Output, Vec<serde_json::Value>) {
-    let trace = dir.join(format!("{}.jsonl", robot.len()));
+/// `step plan` on the demo kitchen with the robot `robot` (a shell command), its trace written to
+/// `trace`; the output and the trace's events.
+fn plan_with(trace: &Path, model: &Path, robot: &str, extra: &[&str]) -> (Output, Vec<serde_json::Value>) {
     let env = format!("bridge:{robot}");
     let o = step()
         .args(["plan", "put the apple in the fridge", "--no-infer-goals", "--json", "--no-prefix-cache"])
         .args(["--max-llm-calls", "8", "--threads", "1", "-m"])
         .arg(model)
         .args(["--env", &env, "--trace"])
-        .arg(&trace)
+        .arg(trace)
         .args(extra)
         .output()
         .unwrap();
-    let events = std::fs::read_to_string(&trace)
+    let events = std::fs::read_to_string(trace)
         .unwrap_or_default()
         .lines()
         .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("trace line {l:?}: {e}")))
@@ -58,7 +58,7 @@ fn a_robot_that_answers_ok_executes_the_plan_and_sees_each_action_as_json() {
     // The robot logs what it was sent, then answers ok.
     let log = dir.path().join("robot.log");
     let robot = format!("while read l; do echo \"$l\" >> {}; echo '{{\"status\": \"ok\"}}'; done", log.display());
-    let (o, events) = plan_with(dir.path(), &model, &robot, &[]);
+    let (o, events) = plan_with(&dir.path().join("ok.jsonl"), &model, &robot, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let execs = kinds(&events, "exec");
     assert!(!execs.is_empty(), "no action executed: {events:?}");
@@ -75,13 +75,13 @@ fn a_robot_that_answers_ok_executes_the_plan_and_sees_each_action_as_json() {
 fn a_crashing_silent_or_garbage_speaking_robot_is_a_clear_error_and_the_trace_keeps_what_came_before() {
     let dir = tempfile::tempdir().unwrap();
     let model = tiny_model(dir.path());
-    let cases: [(&str, &[&str], &[&str]); 3] = [
-        ("read l; echo 'motor fault' >&2; exit 3", &[], &["closed its stdout", "motor fault"]),
-        ("while read l; do echo hello; done", &[], &["hello"]),
-        ("read l; sleep 30", &["--action-timeout", "0.3"], &["300 ms"]),
+    let cases: [(&str, &str, &[&str], &[&str]); 3] = [
+        ("crash", "read l; echo 'motor fault' >&2; exit 3", &[], &["closed its stdout", "motor fault"]),
+        ("garbage", "while read l; do echo hello; done", &[], &["hello"]),
+        ("silent", "read l; sleep 30", &["--action-timeout", "0.3"], &["300 ms"]),
     ];
-    for (robot, extra, says) in cases {
-        let (o, events) = plan_with(dir.path(), &model, robot, extra);
+    for (name, robot, extra, says) in cases {
+        let (o, events) = plan_with(&dir.path().join(format!("{name}.jsonl")), &model, robot, extra);
         let err = stderr(&o);
         assert_eq!(o.status.code(), Some(1), "{robot}: {err}");
         for s in says {
@@ -108,9 +108,9 @@ fn a_bridge_needs_a_command_and_its_trace_is_not_replayed() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     // A replay would move the robot again.
     let model = tiny_model(dir.path());
-    let (o, _) = plan_with(dir.path(), &model, "while read l; do echo '{\"status\": \"ok\"}'; done", &[]);
+    let trace = dir.path().join("ok.jsonl");
+    let (o, _) = plan_with(&trace, &model, "while read l; do echo '{\"status\": \"ok\"}'; done", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let trace = dir.path().join(format!("{}.jsonl", "while read l; do echo '{\"status\": \"ok\"}'; done".len()));
     let o = step().arg("replay").arg(&trace).output().unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("robot bridge") && stderr(&o).contains("move the robot again"), "{}", stderr(&o));
