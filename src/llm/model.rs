@@ -19,7 +19,7 @@ use std::sync::Arc;
 use candle_core::Device;
 
 use super::gguf::{Arch, GgufFile};
-use super::kernels::attn::{AttnOps, Portable};
+use super::kernels::attn::{AttnOps, Portable, SUMS};
 use super::kernels::scores::{self, KeyTiles, Queries, Query, KEYS, MAX_QUERIES};
 use super::kernels::{dot_f32, kernel, matmul, matmul_many, pool, Kernel, Q8Acts, QMatrix, SendPtr};
 use super::{LlmError, Result};
@@ -521,9 +521,10 @@ impl Layer {
             SCORES.with_borrow_mut(|buf| {
                 let sc = fit(buf, rows.len() * job.heads.len() * job.stride());
                 match kernel {
-                    // SAFETY: `Kernel::Avx2` and `Kernel::Avx512` are only chosen when the CPU has
-                    // AVX2 and FMA.
-                    Kernel::Avx2 | Kernel::Avx512 => unsafe { job.run_avx2(rows, sc) },
+                    // SAFETY: `Kernel::Avx2` is only chosen when the CPU has AVX2 and FMA.
+                    Kernel::Avx2 => unsafe { job.run_avx2(rows, sc) },
+                    // SAFETY: `Kernel::Avx512` is only chosen when the CPU has AVX-512F/BW/VL/VNNI.
+                    Kernel::Avx512 => unsafe { job.run_avx512(rows, sc) },
                     // SAFETY: the portable loops need no CPU feature.
                     Kernel::Scalar => unsafe { job.run::<Portable>(rows, sc) },
                 }
@@ -579,6 +580,19 @@ impl HeadBlock<'_> {
         self.run::<super::kernels::attn::Avx2>(rows, sc)
     }
 
+    /// The same code with the AVX-512 weighted sums (the AVX2 softmax), compiled with AVX-512F;
+    /// the same bits again.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,avx512f")]
+    unsafe fn run_avx512(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+        self.run::<super::kernels::attn::Avx512>(rows, sc)
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    unsafe fn run_avx512(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
+        self.run::<Portable>(rows, sc)
+    }
+
     #[cfg(not(target_arch = "x86_64"))]
     unsafe fn run_avx2(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {
         self.run::<Portable>(rows, sc)
@@ -632,16 +646,31 @@ impl HeadBlock<'_> {
         }
         // The weighted sums, a block of values at a time for every row and head: each output
         // element still takes its keys in order (the sum goes through `y` between blocks,
-        // exactly).
+        // exactly). Up to `SUMS` (row, head) pairs that see the same keys of the block go to the
+        // loops together, so that one load of a value row serves them all.
+        let scp = sc.as_ptr();
         for j0 in (0..all).step_by(VALUE_BLOCK) {
+            let vals = &self.values[j0 * kvw + kv..];
+            let mut ys = [std::ptr::null_mut::<f32>(); SUMS];
+            let mut ps = [std::ptr::null::<f32>(); SUMS];
+            let (mut n, mut keys) = (0, 0);
             for (r, i) in rows.clone().enumerate().filter(|&(_, i)| j0 < seen(i)) {
-                let j1 = (j0 + VALUE_BLOCK).min(seen(i));
+                let k = (j0 + VALUE_BLOCK).min(seen(i)) - j0;
                 for (g, head) in self.heads.clone().enumerate() {
-                    // SAFETY: this (query, head) slice belongs to this task alone (see the caller).
-                    let y = unsafe { std::slice::from_raw_parts_mut(self.out.get().add((i * nh + head) * hd), hd) };
-                    let p = &sc[(r * ng + g) * stride..];
-                    O::weighted_sum(y, &p[j0..j1], &self.values[j0 * kvw + kv..], kvw);
+                    if n == SUMS || (n > 0 && k != keys) {
+                        O::weighted_sums(&ys[..n], &ps[..n], keys, hd, vals, kvw);
+                        n = 0;
+                    }
+                    keys = k;
+                    // This (query, head) slice belongs to this task alone (see the caller); the
+                    // unit's scores are `seen(i)` floats at its row of `sc`.
+                    ys[n] = self.out.get().add((i * nh + head) * hd);
+                    ps[n] = scp.add((r * ng + g) * stride + j0);
+                    n += 1;
                 }
+            }
+            if n > 0 {
+                O::weighted_sums(&ys[..n], &ps[..n], keys, hd, vals, kvw);
             }
         }
     }
@@ -847,7 +876,9 @@ mod tests {
                                 // SAFETY: the kernel's features checked above; `got` outlives the
                                 // calls, one writer.
                                 unsafe {
-                                    if simd {
+                                    if kernel == Kernel::Avx512 {
+                                        job.run_avx512(rows, &mut sc)
+                                    } else if simd {
                                         job.run_avx2(rows, &mut sc)
                                     } else {
                                         job.run::<Portable>(rows, &mut sc)

@@ -340,6 +340,7 @@ impl Run<'_> {
             words.push("subgoal:".to_string());
         }
         let hash = prompt_hash(prompt, &words.join("\n"));
+        super::planner::log_prompt("done_check", node, prompt);
         let t = Instant::now();
         let scoring = match self.model.score(prompt, &words) {
             Ok(s) => s,
@@ -401,6 +402,7 @@ impl Run<'_> {
     ) -> Result<usize, StopCause> {
         self.check_global()?;
         let hash = prompt_hash(prompt, &answers.join("\n"));
+        super::planner::log_prompt(role, node, prompt);
         let t = Instant::now();
         let scoring = self.model.score(prompt, answers).map_err(|e| {
             self.trace.event("call_error", json!({"role": role, "node": node, "prompt_hash": hash,

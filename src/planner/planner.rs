@@ -368,14 +368,7 @@ impl Run<'_> {
     ) -> Result<Option<String>, StopCause> {
         self.check_global()?;
         let hash = prompt_hash(prompt, lark);
-        // The full prompt only on request (`--log step::planner=trace`): it is long, and the trace
-        // keeps its hash.
-        if tracing::enabled!(tracing::Level::TRACE) {
-            if let Prompt::Chat(m) = prompt {
-                let turns: Vec<String> = m.iter().skip(1).map(|m| format!("[{}]\n{}", m.role, m.content)).collect();
-                tracing::trace!("{role} prompt at node {node} (the system message left out):\n{}", turns.join("\n"));
-            }
-        }
+        log_prompt(role, node, prompt);
         let t = Instant::now();
         let r = self.model.generate(prompt, Some(lark), &self.cfg.gen);
         let total_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -723,4 +716,15 @@ pub(crate) fn prompt_hash(prompt: &Prompt, lark: &str) -> String {
     h.update(lark.as_bytes());
     let d = h.finalize();
     d.iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+/// The full prompt of a call, only on request (`--log step::planner=trace`): it is long, and the
+/// trace keeps its hash.
+pub(super) fn log_prompt(role: &str, node: NodeId, prompt: &Prompt) {
+    if tracing::enabled!(tracing::Level::TRACE) {
+        if let Prompt::Chat(m) = prompt {
+            let turns: Vec<String> = m.iter().skip(1).map(|m| format!("[{}]\n{}", m.role, m.content)).collect();
+            tracing::trace!("{role} prompt at node {node} (the system message left out):\n{}", turns.join("\n"));
+        }
+    }
 }

@@ -83,6 +83,9 @@ impl World {
     /// The action a failure message names as the fix, when it names exactly one: the executor's
     /// messages end with "; VERB [to] <name> (id) first" or "; VERB first" (checks.rs, verbs.rs).
     fn named_fix(&self, message: &str) -> Option<Action> {
+        // (a fix that held earlier in the plan carries a note after it: without this, no way led
+        // back to an object the robot had walked away from, put down or closed again)
+        let message = message.strip_suffix(super::exec::UNDONE_NOTE).unwrap_or(message);
         let fix = message.rsplit("; ").next()?.strip_suffix(" first")?;
         let (verb, rest) = fix.split_once(' ').unwrap_or((fix, ""));
         let verb: Verb = verb.parse().ok()?;
@@ -224,6 +227,32 @@ mod tests {
         // SIT on a fridge: the way starts with a walk and ends in an affordance error.
         assert!(!World::demo().reaches(&a(Verb::Sit, &[("fridge", 10)])));
         assert!(World::demo().reaches(&a(Verb::Sit, &[("sofa", 30)])));
+    }
+
+    /// A way leads back to what the plan had and undid: the fix of a step that held earlier comes
+    /// with a note after it ("... GRAB <apple> (12) first (this held earlier in the plan; ...)"),
+    /// which once hid the fix, so that no way was found to put an apple back in the fridge after
+    /// it was put down, or to an object the robot had walked away from.
+    #[test]
+    fn a_way_leads_back_to_what_a_later_step_undid() {
+        let mut w = World::demo();
+        for s in [
+            a(Verb::Walk, &[("apple", 12)]),
+            a(Verb::Grab, &[("apple", 12)]),
+            a(Verb::PutBack, &[("apple", 12), ("kitchencounter", 11)]),
+        ] {
+            w.execute(&s).unwrap();
+        }
+        let target = a(Verb::PutIn, &[("apple", 12), ("fridge", 10)]);
+        let why = w.why_not(&target).unwrap();
+        assert!(why.message.ends_with(crate::world::exec::UNDONE_NOTE), "{}", why.message);
+        let (way, _) = w.way_to(&target).expect("a way back to the apple");
+        let way: Vec<String> = way.iter().map(|s| s.to_string()).collect();
+        assert_eq!(way, ["[GRAB] <apple> (12)", "[OPEN] <fridge> (10)"]);
+        // Walked away from the apple: the way starts with a walk back.
+        w.execute(&a(Verb::Walk, &[("sofa", 30)])).unwrap();
+        let (way, _) = w.way_to(&target).expect("a way back across the house");
+        assert_eq!(way.first().map(|s| s.to_string()).as_deref(), Some("[WALK] <apple> (12)"));
     }
 
     #[test]

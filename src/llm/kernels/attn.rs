@@ -28,7 +28,23 @@ pub trait AttnOps {
     /// # Safety
     /// As [`AttnOps::softmax`]; `values` must hold `(p.len() - 1) * stride + y.len()` floats.
     unsafe fn weighted_sum(y: &mut [f32], p: &[f32], values: &[f32], stride: usize);
+
+    /// [`AttnOps::weighted_sum`] for up to [`SUMS`] outputs over the same `keys` rows of values:
+    /// `ys[u]` (`hd` floats) takes `ps[u]` (`keys` floats). Each output's bits are those of its own
+    /// `weighted_sum`; an implementation may share each load of a value row between them.
+    ///
+    /// # Safety
+    /// As [`AttnOps::weighted_sum`], for each pair; the outputs do not overlap.
+    unsafe fn weighted_sums(ys: &[*mut f32], ps: &[*const f32], keys: usize, hd: usize, values: &[f32], stride: usize) {
+        for (&y, &p) in ys.iter().zip(ps) {
+            Self::weighted_sum(std::slice::from_raw_parts_mut(y, hd), std::slice::from_raw_parts(p, keys), values, stride);
+        }
+    }
 }
+
+/// The most outputs one [`AttnOps::weighted_sums`] call takes: four 64-wide heads are sixteen
+/// 512-bit accumulators, half the registers, leaving room for a value row and the probabilities.
+pub const SUMS: usize = 4;
 
 /// Below this the softmax's exponential is 0: `e^-87` is the last power of e that is a normal
 /// float, and beside the row's largest term (1) nothing smaller counts.
@@ -238,6 +254,111 @@ impl AttnOps for Avx2 {
         for (e, yo) in y.iter_mut().enumerate().skip(e) {
             for (j, &pj) in p.iter().enumerate() {
                 *yo = pj.mul_add(*v.add(j * stride + e), *yo);
+            }
+        }
+    }
+}
+
+/// AVX-512 (F): the AVX2 softmax, and weighted sums that share each value row between up to
+/// [`SUMS`] (row, head) pairs: per key, four 16-wide loads feed sixteen fused multiply-adds, where
+/// the AVX2 loop loads a row once for every eight. Each element is still one chain of fmas over the
+/// keys in order, so the bits are the portable loop's. Only to be used where the CPU has AVX-512F.
+#[cfg(target_arch = "x86_64")]
+pub struct Avx512;
+
+#[cfg(target_arch = "x86_64")]
+impl Avx512 {
+    /// `N` outputs over `keys` rows: 64 elements at a time in four registers each, then 16 at a
+    /// time, then the tail element by element.
+    #[inline(always)]
+    unsafe fn sums<const N: usize>(ys: &[*mut f32], ps: &[*const f32], keys: usize, hd: usize, values: &[f32], stride: usize) {
+        debug_assert!(ys.len() == N && ps.len() == N);
+        debug_assert!(keys == 0 || values.len() >= (keys - 1) * stride + hd);
+        let v = values.as_ptr();
+        let mut e = 0;
+        // No closures here (`array::from_fn`): a closure does not inherit the caller's target
+        // features, and each intrinsic inside one became a call.
+        while e + 64 <= hd {
+            let mut acc = [[_mm512_setzero_ps(); 4]; N];
+            for u in 0..N {
+                for c in 0..4 {
+                    acc[u][c] = _mm512_loadu_ps(ys[u].add(e + 16 * c));
+                }
+            }
+            for j in 0..keys {
+                let row = v.add(j * stride + e);
+                let vr = [
+                    _mm512_loadu_ps(row),
+                    _mm512_loadu_ps(row.add(16)),
+                    _mm512_loadu_ps(row.add(32)),
+                    _mm512_loadu_ps(row.add(48)),
+                ];
+                for u in 0..N {
+                    let pv = _mm512_set1_ps(*ps[u].add(j));
+                    for c in 0..4 {
+                        acc[u][c] = _mm512_fmadd_ps(pv, vr[c], acc[u][c]);
+                    }
+                }
+            }
+            for u in 0..N {
+                for c in 0..4 {
+                    _mm512_storeu_ps(ys[u].add(e + 16 * c), acc[u][c]);
+                }
+            }
+            e += 64;
+        }
+        while e + 16 <= hd {
+            let mut acc = [_mm512_setzero_ps(); N];
+            for u in 0..N {
+                acc[u] = _mm512_loadu_ps(ys[u].add(e));
+            }
+            for j in 0..keys {
+                let vr = _mm512_loadu_ps(v.add(j * stride + e));
+                for u in 0..N {
+                    acc[u] = _mm512_fmadd_ps(_mm512_set1_ps(*ps[u].add(j)), vr, acc[u]);
+                }
+            }
+            for u in 0..N {
+                _mm512_storeu_ps(ys[u].add(e), acc[u]);
+            }
+            e += 16;
+        }
+        for u in 0..N {
+            for e in e..hd {
+                let y = ys[u].add(e);
+                for j in 0..keys {
+                    *y = (*ps[u].add(j)).mul_add(*v.add(j * stride + e), *y);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl AttnOps for Avx512 {
+    #[inline(always)]
+    unsafe fn softmax(row: &mut [f32]) {
+        Avx2::softmax(row)
+    }
+
+    #[inline(always)]
+    unsafe fn weighted_sum(y: &mut [f32], p: &[f32], values: &[f32], stride: usize) {
+        Self::sums::<1>(&[y.as_mut_ptr()], &[p.as_ptr()], p.len(), y.len(), values, stride)
+    }
+
+    #[inline(always)]
+    unsafe fn weighted_sums(ys: &[*mut f32], ps: &[*const f32], keys: usize, hd: usize, values: &[f32], stride: usize) {
+        match ys.len() {
+            4 => Self::sums::<4>(ys, ps, keys, hd, values, stride),
+            3 => Self::sums::<3>(ys, ps, keys, hd, values, stride),
+            2 => Self::sums::<2>(ys, ps, keys, hd, values, stride),
+            1 => Self::sums::<1>(ys, ps, keys, hd, values, stride),
+            // Not by recursion: a recursive function is not inlined into the caller compiled with
+            // the CPU's features, and its intrinsics become calls.
+            _ => {
+                for (y, p) in ys.iter().zip(ps) {
+                    Self::sums::<1>(std::slice::from_ref(y), std::slice::from_ref(p), keys, hd, values, stride);
+                }
             }
         }
     }

@@ -231,6 +231,42 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
     }
 }
 
+/// The AVX-512 weighted sums, one to five outputs at a time over the same keys, give each output
+/// the portable loop's bits, for head widths with and without a 64- or 16-wide part.
+#[test]
+fn batched_weighted_sums_equal_the_portable_loop_bit_for_bit() {
+    use super::attn::{AttnOps, Portable};
+    if !avx512::available() {
+        eprintln!("skipped: this CPU has no AVX-512");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(31);
+    for hd in [64, 128, 80, 72, 16, 12] {
+        for keys in [0, 1, 7, 64] {
+            let stride = 3 * hd + 8;
+            let values = randn(&mut rng, keys.max(1) * stride);
+            for n in 1..=5 {
+                let ps: Vec<Vec<f32>> = (0..n).map(|_| randn(&mut rng, keys)).collect();
+                let start: Vec<Vec<f32>> = (0..n).map(|_| randn(&mut rng, hd)).collect();
+                let mut want = start.clone();
+                let mut got = start.clone();
+                let yp: Vec<*mut f32> = got.iter_mut().map(|y| y.as_mut_ptr()).collect();
+                let pp: Vec<*const f32> = ps.iter().map(|p| p.as_ptr()).collect();
+                // SAFETY: AVX-512 checked above; each output holds `hd` floats and each
+                // probability row `keys`; values holds `keys` rows of `stride`.
+                unsafe {
+                    for (y, p) in want.iter_mut().zip(&ps) {
+                        Portable::weighted_sum(y, p, &values, stride);
+                    }
+                    attn::Avx512::weighted_sums(&yp, &pp, keys, hd, &values, stride);
+                }
+                let same = want.iter().flatten().zip(got.iter().flatten()).all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "hd {hd}, {keys} keys, {n} outputs");
+            }
+        }
+    }
+}
+
 /// The integer attention scores: every kernel this CPU has computes the portable definition's
 /// bits, for one to four queries a tile and head widths of 12 to 256; and each score is the f32
 /// query·key product within the rounding, keys with a few channels far above the rest (as

@@ -65,6 +65,11 @@ impl Fail {
 
 type Check = Result<Vec<Op>, Fail>;
 
+/// Added to a missing step's message when the missing fact held earlier in the plan (EAI's
+/// wrong-order case). It comes after the named fix ("...; GRAB <x> (1) first"), so whoever reads
+/// the fix back out of a message strips it first ([`World::way_to`]).
+pub(crate) const UNDONE_NOTE: &str = " (this held earlier in the plan; a later step undid it)";
+
 const FACING_ONLY: &[Relation] = &[Relation::Facing];
 const WALK_CLEARS: &[Relation] = &[Relation::Inside, Relation::Close, Relation::Facing];
 const GRAB_CLEARS: &[Relation] =
@@ -189,7 +194,7 @@ impl World {
                 if eai_kind == MissingStep {
                     eai_kind = FailureKind::WrongOrder;
                 }
-                message.push_str(" (this held earlier in the plan; a later step undid it)");
+                message.push_str(UNDONE_NOTE);
             }
         }
         ExecFailure { kind, eai_kind, action: action.clone(), message, missing: f.missing, connective: f.connective }
