@@ -276,51 +276,12 @@ impl Avx512 {
         debug_assert!(keys == 0 || values.len() >= (keys - 1) * stride + hd);
         let v = values.as_ptr();
         let mut e = 0;
-        // No closures here (`array::from_fn`): a closure does not inherit the caller's target
-        // features, and each intrinsic inside one became a call.
         while e + 64 <= hd {
-            let mut acc = [[_mm512_setzero_ps(); 4]; N];
-            for u in 0..N {
-                for c in 0..4 {
-                    acc[u][c] = _mm512_loadu_ps(ys[u].add(e + 16 * c));
-                }
-            }
-            for j in 0..keys {
-                let row = v.add(j * stride + e);
-                let vr = [
-                    _mm512_loadu_ps(row),
-                    _mm512_loadu_ps(row.add(16)),
-                    _mm512_loadu_ps(row.add(32)),
-                    _mm512_loadu_ps(row.add(48)),
-                ];
-                for u in 0..N {
-                    let pv = _mm512_set1_ps(*ps[u].add(j));
-                    for c in 0..4 {
-                        acc[u][c] = _mm512_fmadd_ps(pv, vr[c], acc[u][c]);
-                    }
-                }
-            }
-            for u in 0..N {
-                for c in 0..4 {
-                    _mm512_storeu_ps(ys[u].add(e + 16 * c), acc[u][c]);
-                }
-            }
+            Self::block::<N, 4>(ys, ps, keys, v, stride, e);
             e += 64;
         }
         while e + 16 <= hd {
-            let mut acc = [_mm512_setzero_ps(); N];
-            for u in 0..N {
-                acc[u] = _mm512_loadu_ps(ys[u].add(e));
-            }
-            for j in 0..keys {
-                let vr = _mm512_loadu_ps(v.add(j * stride + e));
-                for u in 0..N {
-                    acc[u] = _mm512_fmadd_ps(_mm512_set1_ps(*ps[u].add(j)), vr, acc[u]);
-                }
-            }
-            for u in 0..N {
-                _mm512_storeu_ps(ys[u].add(e), acc[u]);
-            }
+            Self::block::<N, 1>(ys, ps, keys, v, stride, e);
             e += 16;
         }
         for u in 0..N {
@@ -329,6 +290,37 @@ impl Avx512 {
                 for j in 0..keys {
                     *y = (*ps[u].add(j)).mul_add(*v.add(j * stride + e), *y);
                 }
+            }
+        }
+    }
+
+    /// Elements `e..e + 16·C` of the `N` outputs, in `C` registers each, over every key.
+    /// No closures here (`array::from_fn`): a closure does not inherit the caller's target
+    /// features, and each intrinsic inside one became a call.
+    #[inline(always)]
+    unsafe fn block<const N: usize, const C: usize>(ys: &[*mut f32], ps: &[*const f32], keys: usize, v: *const f32, stride: usize, e: usize) {
+        let mut acc = [[_mm512_setzero_ps(); C]; N];
+        for u in 0..N {
+            for c in 0..C {
+                acc[u][c] = _mm512_loadu_ps(ys[u].add(e + 16 * c));
+            }
+        }
+        let mut vr = [_mm512_setzero_ps(); C];
+        for j in 0..keys {
+            let row = v.add(j * stride + e);
+            for c in 0..C {
+                vr[c] = _mm512_loadu_ps(row.add(16 * c));
+            }
+            for u in 0..N {
+                let pv = _mm512_set1_ps(*ps[u].add(j));
+                for c in 0..C {
+                    acc[u][c] = _mm512_fmadd_ps(pv, vr[c], acc[u][c]);
+                }
+            }
+        }
+        for u in 0..N {
+            for c in 0..C {
+                _mm512_storeu_ps(ys[u].add(e + 16 * c), acc[u][c]);
             }
         }
     }
