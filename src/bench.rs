@@ -26,11 +26,15 @@ use crate::world::World;
 pub struct LlmBenchConfig {
     pub runs: usize,
     pub decode_tokens: usize,
+    /// Tokens already in the cache before the timed prompt (0: an empty cache). A planner's tree
+    /// node prefills a few hundred new tokens after 1,000-2,000 reused ones, and attention over
+    /// that cache is much of its time; llama-bench's `-d` measures the same shape.
+    pub depth: usize,
 }
 
 impl Default for LlmBenchConfig {
     fn default() -> Self {
-        Self { runs: 3, decode_tokens: 64 }
+        Self { runs: 3, decode_tokens: 64, depth: 0 }
     }
 }
 
@@ -43,7 +47,10 @@ pub struct LlmBenchReport {
     pub kernel: &'static str,
     pub runs: usize,
     pub load_ms: f64,
+    /// Tokens the timed prefill computed (after `depth` cached ones).
     pub prompt_tokens: usize,
+    /// Tokens reused from the cache before them.
+    pub depth: usize,
     pub prefill_tok_per_s: f64,
     pub decode_tok_per_s: f64,
     /// Tokens the model chose per second under the grammar: forced tokens are not counted, but the
@@ -137,6 +144,19 @@ pub fn bench_prompt(world: &World) -> Prompt {
     ])
 }
 
+/// About `depth` tokens of text to put before the timed prompt: its own rendered text over and
+/// over, cut at `depth` tokens (the cut may re-tokenize a token or two differently; the report
+/// gives the depth actually reused).
+fn filler(engine: &Engine, prompt: &Prompt, depth: usize) -> Result<String> {
+    let text = engine.render(prompt)?;
+    let tok = engine.tokenizer();
+    let per = tok.encode(&text)?.len().max(1);
+    let ids = tok.encode(&text.repeat(depth / per + 1))?;
+    let cut = tok.decode(&ids[..depth.min(ids.len())], false)?;
+    // Start the timed prompt on a line of its own.
+    Ok(format!("{cut}\n"))
+}
+
 /// Runs the measurements on a loaded engine.
 pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
     let world = World::demo();
@@ -155,6 +175,26 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     }
 
     let fresh = |max: usize| GenOptions { max_tokens: max, reuse_prefix: false, ..Default::default() };
+    // At a depth, every timed call first computes the filler (untimed), then the prompt after it
+    // with the filler reused.
+    let deep = match cfg.depth {
+        0 => None,
+        d => Some(filler(engine, &prompt, d)?),
+    };
+    let prompt = match &deep {
+        Some(f) => Prompt::Text(format!("{f}{}", engine.render(&prompt)?)),
+        None => prompt,
+    };
+    let timed = |engine: &mut Engine, grammar: Option<&str>, max: usize| -> Result<Generation> {
+        match &deep {
+            Some(f) => {
+                engine.generate(&Prompt::Text(f.clone()), None, &fresh(1))?;
+                engine.generate(&prompt, grammar, &GenOptions { reuse_prefix: true, ..fresh(max) })
+            }
+            None => engine.generate(&prompt, grammar, &fresh(max)),
+        }
+    };
+    let mut depth = 0;
     let mut prefill = Vec::new();
     let mut decode = Vec::new();
     let mut cdecode = Vec::new();
@@ -167,14 +207,15 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     let mut masks = Vec::new();
     let mut prompt_tokens = 0;
     for _ in 0..runs {
-        let g = engine.generate(&prompt, None, &fresh(cfg.decode_tokens))?;
-        prompt_tokens = g.prompt_tokens;
-        prefill.push(rate(g.prompt_tokens, g.timings.prefill_ms));
+        let g = timed(engine, None, cfg.decode_tokens)?;
+        prompt_tokens = g.prompt_tokens - g.reused_tokens;
+        depth = g.reused_tokens;
+        prefill.push(rate(prompt_tokens, g.timings.prefill_ms));
         decode.push(rate(g.tokens.len(), g.timings.decode_ms));
         per_tok_plain.push(g.timings.decode_ms / g.tokens.len().max(1) as f64);
         parts_plain.push(TokenTime::of(&g));
         // The grammar decides the length here (up to 8 action lines); the cap only guards it.
-        let c = engine.generate(&prompt, Some(&lark), &fresh(cfg.decode_tokens.max(256)))?;
+        let c = timed(engine, Some(&lark), cfg.decode_tokens.max(256))?;
         let chosen = c.tokens.len() - c.forced_tokens;
         cdecode.push(rate(chosen, c.timings.decode_ms));
         coutput.push(rate(c.tokens.len(), c.timings.decode_ms));
@@ -195,6 +236,7 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
         runs,
         load_ms: engine.load_ms(),
         prompt_tokens,
+        depth,
         prefill_tok_per_s: median(&mut prefill),
         decode_tok_per_s: median(&mut decode),
         constrained_decode_tok_per_s: median(&mut cdecode),

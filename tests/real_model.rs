@@ -71,3 +71,18 @@ fn smollm2_prefix_snapshot_scores_bit_for_bit() {
         assert_eq!(got.scores, want.scores);
     }
 }
+
+#[test]
+fn bench_at_a_depth_times_only_the_prompt_after_the_cached_tokens() {
+    use step::bench::{run_llm_bench, LlmBenchConfig};
+    let Some(path) = smollm2() else { return };
+    let mut engine = Engine::load_with_slices(&path, &[step::grammar::TEXT_SLICE.to_string()]).unwrap();
+    let flat = run_llm_bench(&mut engine, &LlmBenchConfig { runs: 1, decode_tokens: 4, depth: 0 }).unwrap();
+    assert_eq!(flat.depth, 0);
+    let deep = run_llm_bench(&mut engine, &LlmBenchConfig { runs: 1, decode_tokens: 4, depth: 300 }).unwrap();
+    // The filler is cut at 300 tokens; re-tokenizing the cut may merge or split a token or two.
+    assert!((297..=303).contains(&deep.depth), "reused {} tokens, asked for 300", deep.depth);
+    // The timed prefill is the same prompt, after the filler (a token either side at the seam).
+    assert!(deep.prompt_tokens.abs_diff(flat.prompt_tokens) <= 3, "{} new tokens at depth, {} at 0", deep.prompt_tokens, flat.prompt_tokens);
+    assert!(deep.prefill_tok_per_s > 0.0 && deep.decode_tok_per_s > 0.0);
+}

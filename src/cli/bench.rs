@@ -51,6 +51,10 @@ pub struct LlmArgs {
     /// the ratios. A measuring stick only.
     #[arg(long, value_name = "LLAMA_BENCH")]
     pub compare: Option<PathBuf>,
+    /// Tokens already cached before the timed prompt, as a planner's tree node has (1,000-2,000):
+    /// its prefill then attends to them too. With --compare, llama-bench runs with `-d` the same.
+    #[arg(long, default_value_t = 0)]
+    pub depth: usize,
     /// Alternating rounds for --compare (each side runs once per round; ratios of the medians).
     #[arg(long, default_value_t = 3)]
     pub rounds: usize,
@@ -91,7 +95,7 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
     if let Some(llama) = &a.compare {
         return compare(a, &mut engine, &path, llama);
     }
-    let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens };
+    let cfg = LlmBenchConfig { runs: a.runs as usize, decode_tokens: a.decode_tokens, depth: a.depth };
     let report = run_llm_bench(&mut engine, &cfg)?;
     let mut json = serde_json::to_value(&report)?;
     json["busy_neighbours"] = serde_json::json!(a.busy_neighbour.unwrap_or(0));
@@ -103,14 +107,14 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
 /// Ours and llama-bench, alternating, `rounds` times each; prints both sides' medians and the ratios.
 fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyhow::Result<()> {
     let threads = crate::llm::kernels::pool::global().threads();
-    let cfg = LlmBenchConfig { runs: 1, decode_tokens: a.decode_tokens };
+    let cfg = LlmBenchConfig { runs: 1, decode_tokens: a.decode_tokens, depth: a.depth };
     let result = (|| -> anyhow::Result<_> {
         let (mut ours_p, mut ours_d, mut theirs_p, mut theirs_d) = (vec![], vec![], vec![], vec![]);
-        let mut prompt_tokens = 0;
+        let (mut prompt_tokens, mut depth) = (0, 0);
         for round in 0..a.rounds.max(1) {
             let r = run_llm_bench(engine, &cfg)?;
-            prompt_tokens = r.prompt_tokens;
-            let (p, d) = llama_bench(llama, model, threads, r.prompt_tokens, a.decode_tokens)?;
+            (prompt_tokens, depth) = (r.prompt_tokens, r.depth);
+            let (p, d) = llama_bench(llama, model, threads, r.prompt_tokens, a.decode_tokens, r.depth)?;
             eprintln!(
                 "round {round}: ours prefill {:.1} decode {:.1} tok/s | llama.cpp prefill {p:.1} decode {d:.1} tok/s",
                 r.prefill_tok_per_s, r.decode_tok_per_s
@@ -120,11 +124,12 @@ fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyh
             theirs_p.push(p);
             theirs_d.push(d);
         }
-        Ok((prompt_tokens, median(ours_p), median(ours_d), median(theirs_p), median(theirs_d)))
+        Ok((prompt_tokens, depth, median(ours_p), median(ours_d), median(theirs_p), median(theirs_d)))
     })();
-    let (prompt_tokens, op, od, tp, td) = result?;
+    let (prompt_tokens, depth, op, od, tp, td) = result?;
+    let at = if depth > 0 { format!(" after {depth} cached") } else { String::new() };
     eprintln!(
-        "{} threads, {prompt_tokens}-token prompt, {} generated, medians of {} rounds{}:\n\
+        "{} threads, {prompt_tokens}-token prompt{at}, {} generated, medians of {} rounds{}:\n\
          prefill  ours {op:>8.1}  llama.cpp {tp:>8.1} tok/s  ratio {:.2}x\n\
          decode   ours {od:>8.1}  llama.cpp {td:>8.1} tok/s  ratio {:.2}x",
         threads,
@@ -139,7 +144,7 @@ fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyh
         od / td.max(1e-9),
     );
     let json = serde_json::json!({
-        "model": model.display().to_string(), "threads": threads, "prompt_tokens": prompt_tokens,
+        "model": model.display().to_string(), "threads": threads, "prompt_tokens": prompt_tokens, "depth": depth,
         "decode_tokens": a.decode_tokens, "rounds": a.rounds.max(1), "busy_neighbours": a.busy_neighbour.unwrap_or(0),
         "ours": { "prefill_tok_per_s": op, "decode_tok_per_s": od },
         "llama_cpp": { "prefill_tok_per_s": tp, "decode_tok_per_s": td },
@@ -149,12 +154,15 @@ fn compare(a: &LlmArgs, engine: &mut Engine, model: &Path, llama: &Path) -> anyh
     Ok(())
 }
 
-/// One llama-bench run (`-r 1`): (prompt tok/s, generation tok/s).
-fn llama_bench(bin: &Path, model: &Path, threads: usize, prompt: usize, gen: usize) -> anyhow::Result<(f64, f64)> {
-    let out = Command::new(bin)
-        .arg("-m")
-        .arg(model)
-        .args(["-t", &threads.to_string(), "-p", &prompt.to_string(), "-n", &gen.to_string()])
+/// One llama-bench run (`-r 1`): (prompt tok/s, generation tok/s), after `depth` cached tokens.
+fn llama_bench(bin: &Path, model: &Path, threads: usize, prompt: usize, gen: usize, depth: usize) -> anyhow::Result<(f64, f64)> {
+    let mut cmd = Command::new(bin);
+    cmd.arg("-m").arg(model).args(["-t", &threads.to_string(), "-p", &prompt.to_string(), "-n", &gen.to_string()]);
+    if depth > 0 {
+        // (llama-bench builds before mid-2025 have no `-d`: they fail, and the error says to run it by hand)
+        cmd.args(["-d", &depth.to_string()]);
+    }
+    let out = cmd
         .args(["-r", "1", "-o", "json"])
         .stderr(Stdio::null())
         .output()
@@ -227,7 +235,7 @@ fn table(r: &LlmBenchReport) -> String {
     format!(
         "model {} ({} threads, {} kernels, median of {})\n\
          load                 {:>9.1} ms\n\
-         prefill ({:>3} tok)    {:>9.1} tok/s\n\
+         prefill ({:>3} tok)    {:>9.1} tok/s{}\n\
          decode               {:>9.1} tok/s\n\
          decode, constrained  {:>9.1} tok/s out ({:.2}x plain per output token; {:.0}% forced, {:.1} chosen/s)\n\
          µs per token, plain  {}\n\
@@ -242,6 +250,7 @@ fn table(r: &LlmBenchReport) -> String {
         r.load_ms,
         r.prompt_tokens,
         r.prefill_tok_per_s,
+        if r.depth > 0 { format!(" (after {} cached tokens)", r.depth) } else { String::new() },
         r.decode_tok_per_s,
         r.constrained_output_tok_per_s,
         r.constrained_speed_ratio,
