@@ -157,6 +157,14 @@ fn filler(engine: &Engine, prompt: &Prompt, depth: usize) -> Result<String> {
     Ok(format!("{cut}\n"))
 }
 
+/// The deepest cache `cfg` can put before the bench prompt: the model's context less the prompt
+/// and the tokens decoded after it (the constrained run may decode up to 256).
+pub fn max_depth(engine: &Engine, cfg: &LlmBenchConfig) -> Result<usize> {
+    let prompt = engine.render(&bench_prompt(&World::demo()))?;
+    let used = engine.tokenizer().encode(&prompt)?.len() + cfg.decode_tokens.max(256);
+    Ok(engine.model().config().context_length.saturating_sub(used + 1))
+}
+
 /// Runs the measurements on a loaded engine.
 pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBenchReport> {
     let world = World::demo();

@@ -321,3 +321,14 @@ fn deadline_and_action_timeout_are_seconds_above_zero() {
         }
     }
 }
+
+#[test]
+fn bench_llm_says_how_deep_a_cache_the_model_can_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = tiny_model(dir.path());
+    let o = run(&["bench", "llm", "-m", &model, "--runs", "1", "--decode-tokens", "4", "--depth", "100000"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("--depth 100000") && err.contains("give --depth"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
