@@ -22,6 +22,7 @@ use crate::llm::engine::{Prompt, Score};
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::Relation;
 use crate::world::World;
+use crate::world::Fact;
 
 /// What a decision at a node may write: the decomposition grammar, the targets among its actions
 /// (one chosen becomes a subgoal worked towards below it), and how `done` is judged there.
@@ -34,6 +35,12 @@ pub(super) struct Menu {
     strict: bool,
     /// The answer is the likeliest whole line of the menu (a root setting its own goals).
     whole: bool,
+}
+
+/// The relations among `kept` whose object is the one `a` acts on (its first).
+fn relations_of(kept: &[Fact], a: &Action) -> Vec<Fact> {
+    let Some(first) = a.args.first() else { return Vec::new() };
+    kept.iter().filter(|f| matches!(f, Fact::Edge { from, .. } if *from == first.id)).cloned().collect()
 }
 
 /// The decomposition model's answer to one decision.
@@ -281,6 +288,7 @@ impl Run<'_> {
             return Ok(Vec::new());
         }
         let w = self.world()?;
+        let kept_relations: Vec<_> = self.goals.kept.iter().filter(|f| matches!(f, Fact::Edge { .. })).cloned().collect();
         // Only targets the world knows a way to: not an affordance error, not already so.
         let menu = typed_actions(w, &self.node_focus(node)?)
             .into_iter()
@@ -300,6 +308,11 @@ impl Run<'_> {
                 let Some(after) = trial(&before, a) else { return false };
                 changes_its_objects(w, &after, a)
                     && !(self.keeps_goals() && makes_false(&before, &after, &self.goals.kept))
+                    // (the way may undo what a later step can set again: the fridge opened on the
+                    // way to a PUTIN closes again, the robot walks back to the sofa; not a kept
+                    // relation of the very object the target places: the coffee that is to stay ON
+                    // the coffee maker, grabbed on the way to a PUTIN into it)
+                    && !(self.keeps_goals() && makes_false(w, &after, &relations_of(&kept_relations, a)))
                     && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
             })
             .collect();
