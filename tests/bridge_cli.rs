@@ -75,8 +75,10 @@ fn a_robot_that_answers_ok_executes_the_plan_and_sees_each_action_as_json() {
 fn a_crashing_silent_or_garbage_speaking_robot_is_a_clear_error_and_the_trace_keeps_what_came_before() {
     let dir = tempfile::tempdir().unwrap();
     let model = tiny_model(dir.path());
-    let cases: [(&str, &str, &[&str], &[&str]); 3] = [
+    let cases: [(&str, &str, &[&str], &[&str]); 4] = [
         ("crash", "read l; echo 'motor fault' >&2; exit 3", &[], &["closed its stdout", "motor fault"]),
+        // (gone before the first action: writing it hits a closed pipe, which must not end `step`)
+        ("gone", "echo 'no robot here' >&2; exit 3", &[], &["no robot here"]),
         ("garbage", "while read l; do echo hello; done", &[], &["hello"]),
         ("silent", "read l; sleep 30", &["--action-timeout", "0.3"], &["300 ms"]),
     ];

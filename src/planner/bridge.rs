@@ -237,7 +237,7 @@ impl Env for BridgeEnv {
             return Err(EnvError::Crashed { sent, detail: format!("the bridge already failed: {why}") });
         }
         let wrote = match self.stdin.as_mut() {
-            Some(w) => writeln!(w, "{sent}").and_then(|_| w.flush()),
+            Some(w) => send_line(w, &sent),
             None => Err(std::io::Error::new(std::io::ErrorKind::BrokenPipe, "no stdin")),
         };
         if let Err(e) = wrote {
@@ -299,6 +299,40 @@ impl Drop for BridgeEnv {
         }
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// Writes one line to the bridge. A bridge that has exited makes this an error (reported with its
+/// stderr), not the end of `step`: the CLI restores SIGPIPE's default action so that a closed
+/// stdout ends it quietly, and a write to a closed pipe raises that signal. It is held back on this
+/// thread for the write and, if raised, taken off before the thread's mask is restored.
+fn send_line(w: &mut ChildStdin, line: &str) -> std::io::Result<()> {
+    #[cfg(unix)]
+    // SAFETY: the sets are initialised by sigemptyset/pthread_sigmask before use; the mask is
+    // changed for this thread only and restored before returning.
+    unsafe {
+        let mut pipe: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut pipe);
+        libc::sigaddset(&mut pipe, libc::SIGPIPE);
+        let mut old: libc::sigset_t = std::mem::zeroed();
+        libc::pthread_sigmask(libc::SIG_BLOCK, &pipe, &mut old);
+        let wrote = writeln!(w, "{line}").and_then(|_| w.flush());
+        let mut pending: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut pending);
+        // (only if this write raised it and it was not blocked already by the caller)
+        if libc::sigpending(&mut pending) == 0
+            && libc::sigismember(&pending, libc::SIGPIPE) == 1
+            && libc::sigismember(&old, libc::SIGPIPE) == 0
+        {
+            let mut taken = 0;
+            libc::sigwait(&pipe, &mut taken);
+        }
+        libc::pthread_sigmask(libc::SIG_SETMASK, &old, std::ptr::null_mut());
+        wrote
+    }
+    #[cfg(not(unix))]
+    {
+        writeln!(w, "{line}").and_then(|_| w.flush())
     }
 }
 
