@@ -144,11 +144,10 @@ pub fn bench_prompt(world: &World) -> Prompt {
     ])
 }
 
-/// About `depth` tokens of text to put before the timed prompt: its own rendered text over and
+/// About `depth` tokens of text to put before the timed prompt: its rendered `text` over and
 /// over, cut at `depth` tokens (the cut may re-tokenize a token or two differently; the report
 /// gives the depth actually reused).
-fn filler(engine: &Engine, prompt: &Prompt, depth: usize) -> Result<String> {
-    let text = engine.render(prompt)?;
+fn filler(engine: &Engine, text: &str, depth: usize) -> Result<String> {
     let tok = engine.tokenizer();
     let per = tok.encode(&text)?.len().max(1);
     let ids = tok.encode(&text.repeat(depth / per + 1))?;
@@ -157,11 +156,11 @@ fn filler(engine: &Engine, prompt: &Prompt, depth: usize) -> Result<String> {
     Ok(format!("{cut}\n"))
 }
 
-/// The deepest cache `cfg` can put before the bench prompt: the model's context less the prompt
-/// and the tokens decoded after it (the constrained run may decode up to 256).
-pub fn max_depth(engine: &Engine, cfg: &LlmBenchConfig) -> Result<usize> {
+/// The deepest cache that fits before the bench prompt: the model's context less the prompt and
+/// the tokens decoded after it (`decode_tokens`; the constrained run may decode up to 256).
+pub fn max_depth(engine: &Engine, decode_tokens: usize) -> Result<usize> {
     let prompt = engine.render(&bench_prompt(&World::demo()))?;
-    let used = engine.tokenizer().encode(&prompt)?.len() + cfg.decode_tokens.max(256);
+    let used = engine.tokenizer().encode(&prompt)?.len() + decode_tokens.max(256);
     Ok(engine.model().config().context_length.saturating_sub(used + 1))
 }
 
@@ -185,13 +184,14 @@ pub fn run_llm_bench(engine: &mut Engine, cfg: &LlmBenchConfig) -> Result<LlmBen
     let fresh = |max: usize| GenOptions { max_tokens: max, reuse_prefix: false, ..Default::default() };
     // At a depth, every timed call first computes the filler (untimed), then the prompt after it
     // with the filler reused.
-    let deep = match cfg.depth {
-        0 => None,
-        d => Some(filler(engine, &prompt, d)?),
-    };
-    let prompt = match &deep {
-        Some(f) => Prompt::Text(format!("{f}{}", engine.render(&prompt)?)),
-        None => prompt,
+    let (deep, prompt) = match cfg.depth {
+        0 => (None, prompt),
+        d => {
+            let text = engine.render(&prompt)?;
+            let f = filler(engine, &text, d)?;
+            let after = Prompt::Text(format!("{f}{text}"));
+            (Some(f), after)
+        }
     };
     let timed = |engine: &mut Engine, grammar: Option<&str>, max: usize| -> Result<Generation> {
         match &deep {

@@ -92,7 +92,7 @@ fn llm(a: &LlmArgs) -> anyhow::Result<()> {
         None => Neighbours(Vec::new()),
     };
     let mut engine = Engine::load_with_slices(&path, &[crate::grammar::TEXT_SLICE.to_string()])?;
-    let deepest = crate::bench::max_depth(&engine, &LlmBenchConfig { runs: 1, decode_tokens: a.decode_tokens, depth: 0 })?;
+    let deepest = crate::bench::max_depth(&engine, a.decode_tokens)?;
     if a.depth > deepest {
         anyhow::bail!(
             "--depth {}: the model's context cannot hold that many cached tokens before the bench prompt and its \

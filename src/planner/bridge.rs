@@ -307,18 +307,20 @@ impl Drop for BridgeEnv {
 /// stdout ends it quietly, and a write to a closed pipe raises that signal. It is held back on this
 /// thread for the write and, if raised, taken off before the thread's mask is restored.
 fn send_line(w: &mut ChildStdin, line: &str) -> std::io::Result<()> {
+    let write = |w: &mut ChildStdin| writeln!(w, "{line}").and_then(|_| w.flush());
+    #[cfg(not(unix))]
+    return write(w);
     #[cfg(unix)]
-    // SAFETY: the sets are initialised by sigemptyset/pthread_sigmask before use; the mask is
-    // changed for this thread only and restored before returning.
+    // SAFETY: the sets are initialised by sigemptyset/pthread_sigmask/sigpending before use; the
+    // mask is changed for this thread only and restored before returning.
     unsafe {
         let mut pipe: libc::sigset_t = std::mem::zeroed();
         libc::sigemptyset(&mut pipe);
         libc::sigaddset(&mut pipe, libc::SIGPIPE);
         let mut old: libc::sigset_t = std::mem::zeroed();
         libc::pthread_sigmask(libc::SIG_BLOCK, &pipe, &mut old);
-        let wrote = writeln!(w, "{line}").and_then(|_| w.flush());
+        let wrote = write(w);
         let mut pending: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut pending);
         // (only if this write raised it and it was not blocked already by the caller)
         if libc::sigpending(&mut pending) == 0
             && libc::sigismember(&pending, libc::SIGPIPE) == 1
@@ -329,10 +331,6 @@ fn send_line(w: &mut ChildStdin, line: &str) -> std::io::Result<()> {
         }
         libc::pthread_sigmask(libc::SIG_SETMASK, &old, std::ptr::null_mut());
         wrote
-    }
-    #[cfg(not(unix))]
-    {
-        writeln!(w, "{line}").and_then(|_| w.flush())
     }
 }
 

@@ -21,8 +21,7 @@ use crate::grammar::{ActionSet, DecomposeGrammar, Proposal, Strength};
 use crate::llm::engine::{Prompt, Score};
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::Relation;
-use crate::world::World;
-use crate::world::Fact;
+use crate::world::{Fact, World};
 
 /// What a decision at a node may write: the decomposition grammar, the targets among its actions
 /// (one chosen becomes a subgoal worked towards below it), and how `done` is judged there.
@@ -288,7 +287,6 @@ impl Run<'_> {
             return Ok(Vec::new());
         }
         let w = self.world()?;
-        let kept_relations: Vec<_> = self.goals.kept.iter().filter(|f| matches!(f, Fact::Edge { .. })).cloned().collect();
         // Only targets the world knows a way to: not an affordance error, not already so.
         let menu = typed_actions(w, &self.node_focus(node)?)
             .into_iter()
@@ -312,7 +310,7 @@ impl Run<'_> {
                     // way to a PUTIN closes again, the robot walks back to the sofa; not a kept
                     // relation of the very object the target places: the coffee that is to stay ON
                     // the coffee maker, grabbed on the way to a PUTIN into it)
-                    && !(self.keeps_goals() && makes_false(w, &after, &relations_of(&kept_relations, a)))
+                    && !(self.keeps_goals() && makes_false(w, &after, &relations_of(&self.goals.kept, a)))
                     && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
             })
             .collect();
