@@ -13,7 +13,7 @@ use serde_json::json;
 use super::planner::{grammar_error, prompt_hash, ContextMode, End, NodeLoop, Run};
 use super::goals;
 use super::prompt::NodeView;
-use super::rules::{changes_its_objects, fresh_steps, gained, makes_false, recent, trial, changes_nothing};
+use super::rules::{changes_its_objects, changes_nothing, fresh_steps, gained, makes_false, recent, takes_a_reserved_hand, trial};
 use super::tree::NodeId;
 use super::{ActionChoice, CallRecord, StopCause};
 use crate::action::{Action, Verb};
@@ -123,7 +123,13 @@ impl Run<'_> {
         }
         let subgoal_menu: Vec<String> = if offered {
             // (a line that contradicts one the root set itself is no longer offered)
-            self.goals.lines.iter().filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l)).cloned().collect()
+            // (nor, yet, a left hand's hold line that waits for the right hand's)
+            self.goals
+                .lines
+                .iter()
+                .filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l) && !self.waits_for_its_hand(l, &st.tried))
+                .cloned()
+                .collect()
         } else {
             Vec::new()
         };
@@ -311,6 +317,8 @@ impl Run<'_> {
                     // relation of the very object the target places: the coffee that is to stay ON
                     // the coffee maker, grabbed on the way to a PUTIN into it)
                     && !(self.keeps_goals() && makes_false(w, &after, &relations_of(&self.goals.kept, a)))
+                    // (nor may it take a hand a hold line reserves, way included)
+                    && !(self.keeps_goals() && takes_a_reserved_hand(w, &after, &self.goals.kept))
                     && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
             })
             .collect();

@@ -230,7 +230,9 @@ pub struct PlannerConfig {
     /// is to be held). A chosen target is judged by its own action, not by the steps on its way (a
     /// closed fridge that is to stay closed may be opened to put the apple in, and closed again by
     /// its own line). A line met when done that a later line's way made false is offered to the
-    /// root again, once. The random planner obeys it too. It reads the goal lines the protocol
+    /// root again, once. A hold not yet met reserves its hand: no step fills that hand with another
+    /// object or puts the object in the other hand, and a left hand's line waits for the right
+    /// hand's (GRAB fills the right hand first). The random planner obeys it too. It reads the goal lines the protocol
     /// shows, and never decides when to stop. It applies where the protocol shows goals at all: a
     /// task whose goals are only closeness and actions keeps no fact but is under its rules
     /// (`skip_idle`, `lines_done_at`) all the same.

@@ -1,7 +1,8 @@
 //! The rules over the world that narrow what a decision is offered, each a flag of
 //! `PlannerConfig`, each obeyed by the random chooser too so that figures stay comparable: fresh
 //! steps (no repeats), protected changes (a node does not undo its own work), kept goals (nothing
-//! the shown goals ask for is undone), idle steps (none that change nothing). They try candidates
+//! the shown goals ask for is undone, and a hand a hold line reserves stays free for it), idle
+//! steps (none that change nothing). They try candidates
 //! on a copy of the world. None of them ends a run or a line: when to stop stays the model's
 //! decision.
 
@@ -34,9 +35,12 @@ impl Run<'_> {
             return Ok(ActionSet::Exact(list));
         }
         let w = self.world()?;
+        let hands = self.keeps_goals();
         let keep = |a: &Action| {
             trial(w, a).is_none_or(|after| {
-                !makes_false(w, &after, &protected) && !(idle_rule && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
+                !makes_false(w, &after, &protected)
+                    && !(hands && takes_a_reserved_hand(w, &after, &self.goals.kept))
+                    && !(idle_rule && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
             })
         };
         Ok(ActionSet::Exact(list.into_iter().filter(|a| keep(a)).collect()))
@@ -59,6 +63,27 @@ impl Run<'_> {
     /// goals name the verb as an action the plan must include.
     pub(super) fn skips_idle(&self, verb: Verb) -> bool {
         self.idle_rule() && !self.goals.named_verbs.contains(&verb)
+    }
+
+    /// Whether the root's goal line `line` waits for its hand: it asks for something in the left
+    /// hand while the right hand is free and another line, not yet taken, asks for something else
+    /// there. GRAB fills the right hand first, so the left hand's line is met only after the right
+    /// one (see `takes_a_reserved_hand`, which keeps a step from spoiling either).
+    pub(super) fn waits_for_its_hand(&self, line: &str, tried: &[String]) -> bool {
+        if !self.keeps_goals() {
+            return false;
+        }
+        let (Some(w), Some(f)) = (self.env.world(), self.line_fact(line)) else { return false };
+        let Fact::Edge { relation: Relation::HoldsLh, to: x, .. } = *f else { return false };
+        if w.holds(f) || w.held().iter().any(|&(h, _)| h == Relation::HoldsRh) {
+            return false;
+        }
+        self.goals.kept.iter().any(|g| {
+            matches!(*g, Fact::Edge { relation: Relation::HoldsRh, to: y, .. } if y != x)
+                && !w.holds(g)
+                && !tried.contains(&w.describe(g))
+                && self.goals.lines.contains(&w.describe(g))
+        })
     }
 
     /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).
@@ -156,6 +181,26 @@ pub(super) fn changes_its_objects(now: &World, after: &World, target: &Action) -
 /// Whether a fact of `facts` that holds `now` does not hold `after`.
 pub(super) fn makes_false(now: &World, after: &World, facts: &[Fact]) -> bool {
     facts.iter().any(|f| now.holds(f) && !after.holds(f))
+}
+
+/// Whether going from `now` to `after` spoils a hold the task asks for and does not have yet: the
+/// hand a goal line reserves (free now) takes another object, or the line's object lands in the
+/// other hand (unless a line asks for it there too). VirtualHome's GRAB fills the right hand first,
+/// so "hold the toothbrush in the left hand" is met by grabbing it second, never first; a tiny model
+/// cannot see that, and a random one meets it by chance.
+pub(super) fn takes_a_reserved_hand(now: &World, after: &World, kept: &[Fact]) -> bool {
+    let (held_now, held_after) = (now.held(), after.held());
+    kept.iter().any(|f| {
+        let Fact::Edge { from, relation: hand @ (Relation::HoldsRh | Relation::HoldsLh), to: x } = *f else { return false };
+        if now.holds(f) {
+            return false;
+        }
+        let other = if hand == Relation::HoldsRh { Relation::HoldsLh } else { Relation::HoldsRh };
+        let elsewhere = Fact::Edge { from, relation: other, to: x };
+        let hand_taken = !held_now.iter().any(|&(h, _)| h == hand) && held_after.iter().any(|&(h, id)| h == hand && id != x);
+        let wrong_hand = !now.holds(&elsewhere) && after.holds(&elsewhere) && !kept.contains(&elsewhere);
+        hand_taken || wrong_hand
+    })
 }
 
 /// The world after running `a` on a copy of `w`, if it can run.

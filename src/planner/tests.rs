@@ -1318,3 +1318,61 @@ fn calls_group_into_decisions() {
     // once counted as one node).
     assert_eq!(starts, [0, 2, 5, 7, 9]);
 }
+
+#[test]
+fn hold_lines_are_met_in_the_order_grab_fills_the_hands() {
+    use crate::world::vocab::Relation;
+    let (left_apple, right_milk) = ("character is HOLDS_LH to apple", "character is HOLDS_RH to milk");
+    let kept = vec![
+        Fact::Edge { from: 3, relation: Relation::HoldsLh, to: 12 },
+        Fact::Edge { from: 3, relation: Relation::HoldsRh, to: 13 },
+    ];
+    let go = |keep_goals: bool, answers: &[&str]| {
+        let mut m = Scripted::new(answers);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { kept: kept.clone(), ..offered(&[left_apple, right_milk]) };
+        let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        let held = env.world().map(|w| w.held()).unwrap_or_default();
+        (out, m, held)
+    };
+    // The left hand's line waits while the right hand is free: the milk's line is the only one
+    // offered, so it is taken without a call.
+    let (out, m, held) =
+        go(true, &["action: [GRAB] <milk> (13)", "done", "action: [GRAB] <apple> (12)", "done"]);
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(m.answers.len(), 0, "every answer was asked for");
+    assert_eq!(held, [(Relation::HoldsRh, 13), (Relation::HoldsLh, 12)]);
+    // Without kept goals the apple's line may come first, the apple takes the right hand, and
+    // the milk goes to the left: neither line is met.
+    let (_, _, held) = go(
+        false,
+        &[&format!("subgoal: {left_apple}"), "action: [GRAB] <apple> (12)", "done", "action: [GRAB] <milk> (13)", "done"],
+    );
+    assert_eq!(held, [(Relation::HoldsRh, 12), (Relation::HoldsLh, 13)]);
+}
+
+#[test]
+fn a_grab_that_takes_the_hand_a_hold_line_reserves_spoils_it() {
+    use super::rules::{takes_a_reserved_hand, trial};
+    use crate::action::ObjRef;
+    use crate::world::vocab::Relation;
+    let hold = |hand, id| Fact::Edge { from: 3, relation: hand, to: id };
+    let act = |v: Verb, id: u32, name: &str| Action::new(v, vec![ObjRef::new(name, id)]).unwrap();
+    let grab = |id: u32, name: &str| act(Verb::Grab, id, name);
+    let mut w = World::demo();
+    w.execute(&act(Verb::Walk, 12, "apple")).unwrap();
+    let apple = trial(&w, &grab(12, "apple")).unwrap();
+    // Hands free: GRAB puts the apple in the right hand.
+    assert!(takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsRh, 13)]), "the milk's hand");
+    assert!(takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsLh, 12)]), "the apple's wrong hand");
+    assert!(!takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsRh, 12)]));
+    // (a task that asks for it in both hands can meet one of them)
+    assert!(!takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsLh, 12), hold(Relation::HoldsRh, 12)]));
+    // With the milk in the right hand, the apple goes to the left.
+    w.execute(&act(Verb::Walk, 13, "milk")).unwrap();
+    w.execute(&grab(13, "milk")).unwrap();
+    let apple = trial(&w, &grab(12, "apple")).unwrap();
+    assert!(!takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsLh, 12), hold(Relation::HoldsRh, 13)]));
+    assert!(takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsRh, 12)]), "the right hand is the milk's");
+}
