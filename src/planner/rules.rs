@@ -2,9 +2,8 @@
 //! `PlannerConfig`, each obeyed by the random chooser too so that figures stay comparable: fresh
 //! steps (no repeats), protected changes (a node does not undo its own work), kept goals (nothing
 //! the shown goals ask for is undone, and a hand a hold line reserves stays free for it), idle
-//! steps (none that change nothing). They try candidates
-//! on a copy of the world. None of them ends a run or a line: when to stop stays the model's
-//! decision.
+//! steps (none that change nothing). They try candidates on a copy of the world. None of them
+//! ends a run or a line: when to stop stays the model's decision.
 
 use serde_json::json;
 
