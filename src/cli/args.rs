@@ -214,8 +214,9 @@ pub struct DecisionArgs {
     /// `step plan`: the root proposes steps at once, setting no goal lines of its own.
     #[arg(long, conflicts_with = "infer_goals")]
     pub no_infer_goals: bool,
-    /// Where the root sets goal lines: below a line it set, offer every step (by default only
-    /// those that make the line true or run its verb, where any do).
+    /// Below a goal line the root set, offer every step (by default only those that make the line
+    /// true or run its verb, where any do); below a shown line that names actions ("POUR"), every
+    /// step too (by default only that verb's, where any are offered).
     #[arg(long)]
     pub any_step_under_lines: bool,
     /// Where the root sets goal lines: offer as lines the verbs of every step that changes

@@ -328,24 +328,29 @@ impl Run<'_> {
     /// Below a goal line the model set itself (`infer_goals`): only the steps and targets that
     /// make the line true (its fact holds after them, a target's way included) or run its verb,
     /// when there are any. The line is the model's own subgoal; the world knows which steps
-    /// achieve it (SmolLM2 put the apple ON the fridge under "apple is INSIDE to fridge"). Never
-    /// applied to the lines a protocol shows: working the task's own goals out in the world would
-    /// be the oracle the method rules out.
+    /// achieve it (SmolLM2 put the apple ON the fridge under "apple is INSIDE to fridge").
+    /// Below a shown line that names actions ("POUR", "READ or LOOKAT"), only those actions, read
+    /// from the line's words: a step of another verb is not congruent with it (SmolLM2 wrote
+    /// PUTBACK under "POUR" in every "Make coffee"). A shown line's fact is never worked out in
+    /// the world: which steps make the task's own goals true would be the oracle the method
+    /// rules out.
     fn toward_own_line(&self, node: NodeId, actions: ActionSet, targets: &[Action]) -> Result<ActionSet, StopCause> {
         let ActionSet::Exact(list) = actions else { return Ok(actions) };
         if !self.cfg.toward_lines || !self.under_offered(node) {
             return Ok(ActionSet::Exact(list));
         }
-        let Some(meaning) = self.goals.meaning(&self.tree.node(node).text) else { return Ok(ActionSet::Exact(list)) };
+        let text = &self.tree.node(node).text;
         let w = self.world()?;
-        let achieving: Vec<Action> = list
-            .iter()
-            .filter(|a| match meaning {
-                goals::Meaning::Verb(v) => a.verb == *v,
-                goals::Meaning::Fact(f) => outcome(w, a, targets).is_some_and(|after| after.holds(f)),
-            })
-            .cloned()
-            .collect();
+        let achieving: Vec<Action> = match self.goals.meaning(text) {
+            Some(goals::Meaning::Verb(v)) => list.iter().filter(|a| a.verb == *v).cloned().collect(),
+            Some(goals::Meaning::Fact(f)) => {
+                list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect()
+            }
+            None => {
+                let verbs = goals::line_verbs(text);
+                list.iter().filter(|a| verbs.contains(&a.verb)).cloned().collect()
+            }
+        };
         Ok(ActionSet::Exact(if achieving.is_empty() { list } else { achieving }))
     }
 

@@ -84,6 +84,18 @@ impl Goals {
     }
 }
 
+/// The verbs a goal line names as actions the plan must include, in the words of EAI's action
+/// goals ("POUR", "READ or LOOKAT"): every word between the `or`s a verb, else none (a state or
+/// relation line).
+pub fn line_verbs(line: &str) -> Vec<Verb> {
+    let verbs: Vec<Option<Verb>> = line.split(" or ").map(|w| w.trim().parse().ok()).collect();
+    if verbs.iter().all(Option::is_some) {
+        verbs.into_iter().flatten().collect()
+    } else {
+        Vec::new()
+    }
+}
+
 /// The other state of a two-state pair.
 fn opposite(s: State) -> Option<State> {
     Some(match s {
@@ -262,6 +274,14 @@ pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn an_action_line_names_its_verbs_and_a_fact_line_none() {
+        assert_eq!(line_verbs("POUR"), [Verb::Pour]);
+        assert_eq!(line_verbs("READ or LOOKAT"), [Verb::Read, Verb::LookAt]);
+        assert!(line_verbs("fridge is OPEN").is_empty());
+        assert!(line_verbs("READ or the fridge").is_empty());
+    }
     use super::*;
 
     #[test]

@@ -271,7 +271,9 @@ pub struct PlannerConfig {
     pub infer_goals: bool,
     /// Below a goal line the root set itself (`infer_goals`), offer only the steps and targets
     /// that make the line true or run its verb, where any do (read from trials on the world; the
-    /// random planner obeys it too). Shown goal lines are never narrowed so.
+    /// random planner obeys it too). Below a shown line that names actions ("POUR", "READ or
+    /// LOOKAT"), only steps and targets of those verbs, where any are offered: the line's words,
+    /// not the world, say what is congruent with it. A shown line's fact is never worked out so.
     pub toward_lines: bool,
     /// With `infer_goals`, offer as goal lines the verbs of every step that changes nothing
     /// (LOOKAT, TOUCH, PULL), not only those the instruction names ([`goals::names_verb`]).
