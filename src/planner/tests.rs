@@ -1376,3 +1376,22 @@ fn a_grab_that_takes_the_hand_a_hold_line_reserves_spoils_it() {
     assert!(!takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsLh, 12), hold(Relation::HoldsRh, 13)]));
     assert!(takes_a_reserved_hand(&w, &apple, &[hold(Relation::HoldsRh, 12)]), "the right hand is the milk's");
 }
+
+#[test]
+fn below_a_shown_line_that_names_actions_only_those_actions_are_offered() {
+    let go = |toward_lines: bool| {
+        let mut m = Scripted::new(&["action: [OPEN] <fridge> (10)", "done"]);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let req = PlanRequest { named_verbs: vec![Verb::Open], ..offered(&["OPEN or CLOSE"]) };
+        let cfg = PlannerConfig { toward_lines, lines_done_at: None, ..defaults() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    // (the line is the only one, so it is taken without a call: the first grammar is below it)
+    let (out, m) = go(true);
+    assert_eq!(out.stop, StopCause::Done);
+    assert!(plan_lines(&out).contains(&"[OPEN] <fridge> (10)".to_string()), "{:?}", plan_lines(&out));
+    assert!(m.grammars[0].contains("\"[OPEN] \"") && !m.grammars[0].contains("\"[WALK] \""), "{}", m.grammars[0]);
+    let (_, m) = go(false);
+    assert!(m.grammars[0].contains("\"[WALK] \""), "{}", m.grammars[0]);
+}
