@@ -1232,7 +1232,9 @@ fn an_instruction_that_names_no_object_of_the_scene_sets_no_goals_over_all_of_it
 fn a_goal_line_that_repeats_the_instructions_first_word_is_still_taken() {
     // "WATCH" under "Watch the television": a line is congruent by construction; the echo check
     // (for subgoals the model writes) once rejected it, and the line was lost.
-    let mut m = Scripted::new(&["action: [WALK] <television> (31)", "done"]);
+    // (below the line only its verb is offered: the watching, a target whose way walks there, is
+    // the one choice and is taken without a call)
+    let mut m = Scripted::new(&["done"]);
     let mut env = SimEnv::new(World::demo(), vec![]);
     let req = PlanRequest {
         subgoals: vec!["WATCH".to_string()],
@@ -1242,7 +1244,7 @@ fn a_goal_line_that_repeats_the_instructions_first_word_is_still_taken() {
     assert_eq!(out.stop, StopCause::Done);
     assert_eq!(out.tree.node(1).text, "WATCH");
     assert_eq!(out.tree.node(1).status, Status::Executed, "{:?}", out.tree.node(1).history);
-    assert_eq!(plan_lines(&out), ["[WALK] <television> (31)"]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[WATCH] <television> (31)"), "{:?}", plan_lines(&out));
 }
 
 #[test]
