@@ -274,6 +274,7 @@ pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
 
     #[test]
     fn an_action_line_names_its_verbs_and_a_fact_line_none() {
@@ -282,7 +283,6 @@ mod tests {
         assert!(line_verbs("fridge is OPEN").is_empty());
         assert!(line_verbs("READ or the fridge").is_empty());
     }
-    use super::*;
 
     #[test]
     fn phrases_that_name_no_object_of_the_scene_are_found() {
