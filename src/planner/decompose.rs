@@ -293,8 +293,18 @@ impl Run<'_> {
             return Ok(Vec::new());
         }
         let w = self.world()?;
+        let mut candidates = typed_actions(w, &self.node_focus(node)?);
+        // Below a left hand's hold line with the right hand free, the way to it is to grab
+        // something else first (GRAB fills the right hand first): the focus's other grabs too.
+        if let Some(x) = self.left_hand_to_fill(node) {
+            let others: Vec<Action> = typed_actions(w, &self.focus)
+                .into_iter()
+                .filter(|a| a.verb == Verb::Grab && a.args.first().is_some_and(|o| o.id != x) && !candidates.contains(a))
+                .collect();
+            candidates.extend(others);
+        }
         // Only targets the world knows a way to: not an affordance error, not already so.
-        let menu = typed_actions(w, &self.node_focus(node)?)
+        let menu = candidates
             .into_iter()
             .filter(|a| !matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find))
             .filter(|a| !self.cfg.excluded_verbs.contains(&a.verb) && !feasible.contains(a))

@@ -8,6 +8,7 @@
 use serde_json::json;
 
 use super::planner::{NodeLoop, Run};
+use super::tree::NodeId;
 use super::StopCause;
 use crate::action::{Action, Verb};
 use crate::grammar::ActionSet;
@@ -83,6 +84,18 @@ impl Run<'_> {
                 && !tried.contains(&w.describe(g))
                 && self.goals.lines.contains(&w.describe(g))
         })
+    }
+
+    /// The object of the left hand's hold line `node` works on, while the right hand is free and
+    /// the object is not held: grabbing it now would put it in the right hand.
+    pub(super) fn left_hand_to_fill(&self, node: NodeId) -> Option<u32> {
+        if !self.keeps_goals() || !self.under_offered(node) {
+            return None;
+        }
+        let w = self.env.world()?;
+        let f = self.line_fact(&self.tree.node(node).text)?;
+        let Fact::Edge { relation: Relation::HoldsLh, to: x, .. } = *f else { return None };
+        (!w.held().iter().any(|&(h, id)| h == Relation::HoldsRh || id == x)).then_some(x)
     }
 
     /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).

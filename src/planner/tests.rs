@@ -1397,3 +1397,29 @@ fn below_a_shown_line_that_names_actions_only_those_actions_are_offered() {
     let (_, m) = go(false);
     assert!(m.grammars[0].contains("\"[WALK] \""), "{}", m.grammars[0]);
 }
+
+#[test]
+fn below_a_left_hand_line_with_the_right_hand_free_something_else_is_grabbed_first() {
+    use crate::world::vocab::Relation;
+    let line = "character is HOLDS_LH to apple";
+    let go = |keep_goals: bool, answers: &[&str]| {
+        let mut m = Scripted::new(answers);
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        let kept = vec![Fact::Edge { from: 3, relation: Relation::HoldsLh, to: 12 }];
+        let req = PlanRequest { kept, ..offered(&[line]) };
+        let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
+        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        (out, m, env.world().map(|w| w.held()).unwrap_or_default())
+    };
+    // The line names the apple only, yet the milk may be grabbed (into the right hand); then the
+    // apple goes to the left.
+    let (out, m, held) = go(true, &["action: [GRAB] <milk> (13)", "action: [GRAB] <apple> (12)", "done"]);
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(m.answers.len(), 0, "every answer was asked for");
+    assert!(m.grammars[0].contains("<milk> (13)"), "{}", m.grammars[0]);
+    assert_eq!(held, [(Relation::HoldsRh, 13), (Relation::HoldsLh, 12)]);
+    // Without kept goals the node is about the apple alone: grabbing it fills the right hand.
+    let (_, m, held) = go(false, &["action: [GRAB] <apple> (12)", "done"]);
+    assert!(!m.grammars[0].contains("<milk> (13)"), "{}", m.grammars[0]);
+    assert_eq!(held, [(Relation::HoldsRh, 12)]);
+}
