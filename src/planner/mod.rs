@@ -233,8 +233,8 @@ pub struct PlannerConfig {
     /// root again, once. A hold not yet met reserves its hand: no step fills that hand with another
     /// object or puts the object in the other hand, a left hand's line waits for the right
     /// hand's (GRAB fills the right hand first), and below a left hand's line with the right hand
-    /// free, grabbing another object of the focus is offered as the way to it. The random planner obeys it too. It reads the goal lines the protocol
-    /// shows, and never decides when to stop. It applies where the protocol shows goals at all: a
+    /// free, grabbing another object of the focus is offered as the way to it. The random planner
+    /// obeys it too. It reads the goal lines the protocol shows, and never decides when to stop. It applies where the protocol shows goals at all: a
     /// task whose goals are only closeness and actions keeps no fact but is under its rules
     /// (`skip_idle`, `lines_done_at`) all the same.
     pub keep_goals: bool,

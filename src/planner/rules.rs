@@ -65,37 +65,39 @@ impl Run<'_> {
         self.idle_rule() && !self.goals.named_verbs.contains(&verb)
     }
 
+    /// The object of `line` when it is a left hand's hold line that is not met and cannot be met
+    /// by a grab now: the right hand is free (GRAB fills it first) and the object is not held.
+    fn left_hold_before_right(&self, line: &str) -> Option<u32> {
+        if !self.keeps_goals() {
+            return None;
+        }
+        let w = self.env.world()?;
+        let Fact::Edge { relation: Relation::HoldsLh, to: x, .. } = *self.line_fact(line)? else { return None };
+        (!w.held().iter().any(|&(h, id)| h == Relation::HoldsRh || id == x)).then_some(x)
+    }
+
     /// Whether the root's goal line `line` waits for its hand: it asks for something in the left
     /// hand while the right hand is free and another line, not yet taken, asks for something else
     /// there. GRAB fills the right hand first, so the left hand's line is met only after the right
     /// one (see `takes_a_reserved_hand`, which keeps a step from spoiling either).
     pub(super) fn waits_for_its_hand(&self, line: &str, tried: &[String]) -> bool {
-        if !self.keeps_goals() {
-            return false;
-        }
-        let (Some(w), Some(f)) = (self.env.world(), self.line_fact(line)) else { return false };
-        let Fact::Edge { relation: Relation::HoldsLh, to: x, .. } = *f else { return false };
-        if w.holds(f) || w.held().iter().any(|&(h, _)| h == Relation::HoldsRh) {
-            return false;
-        }
+        let (Some(x), Some(w)) = (self.left_hold_before_right(line), self.env.world()) else { return false };
         self.goals.kept.iter().any(|g| {
+            let right_line = w.describe(g);
             matches!(*g, Fact::Edge { relation: Relation::HoldsRh, to: y, .. } if y != x)
                 && !w.holds(g)
-                && !tried.contains(&w.describe(g))
-                && self.goals.lines.contains(&w.describe(g))
+                && !tried.contains(&right_line)
+                && self.goals.lines.contains(&right_line)
         })
     }
 
     /// The object of the left hand's hold line `node` works on, while the right hand is free and
     /// the object is not held: grabbing it now would put it in the right hand.
     pub(super) fn left_hand_to_fill(&self, node: NodeId) -> Option<u32> {
-        if !self.keeps_goals() || !self.under_offered(node) {
+        if !self.under_offered(node) {
             return None;
         }
-        let w = self.env.world()?;
-        let f = self.line_fact(&self.tree.node(node).text)?;
-        let Fact::Edge { relation: Relation::HoldsLh, to: x, .. } = *f else { return None };
-        (!w.held().iter().any(|&(h, id)| h == Relation::HoldsRh || id == x)).then_some(x)
+        self.left_hold_before_right(&self.tree.node(node).text)
     }
 
     /// The kept fact a goal line states, if it states one (an action line, or closeness, does not).
