@@ -87,8 +87,8 @@ pub(super) struct NodeLoop {
     /// What this node's steps changed, kept from being undone by its later steps (see
     /// `PlannerConfig::protect_changes`).
     pub(super) established: Vec<Fact>,
-    /// The root's goal lines whose fact held when they were done, and those offered again since
-    /// (see [`Run::undone_lines`]).
+    /// The root's goal lines whose fact held when they were done, and those offered again since,
+    /// once for each time (see [`Run::undone_lines`]).
     pub(super) met_lines: Vec<String>,
     pub(super) reoffered: Vec<String>,
 }

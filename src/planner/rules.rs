@@ -108,14 +108,16 @@ impl Run<'_> {
 
     /// Where the goals are kept: a goal line that was met when done, and whose fact a later step
     /// has made false (a target's way: SWITCHOFF of a dishwasher that is to be on, to open it and
-    /// put the plates in), is offered to the root again, once. Not a stop rule: it only lets the
-    /// root take a line again that its own steps undid; lines given up are not offered again.
+    /// put the plates in), is offered to the root again, each time it is undone, up to
+    /// [`REOFFERS`] times (a fragile fact, FACING the computer, is undone by every later line
+    /// that walks or turns). Not a stop rule: it only lets the root take a line again that its
+    /// own steps undid; lines given up are not offered again.
     pub(super) fn undone_lines(&mut self, st: &mut NodeLoop) -> Result<(), StopCause> {
         let w = self.world()?;
         let undone: Vec<String> = st
             .met_lines
             .iter()
-            .filter(|l| !st.reoffered.contains(l))
+            .filter(|l| st.reoffered.iter().filter(|r| r == l).count() < REOFFERS)
             .filter(|l| self.line_fact(l).is_some_and(|f| !w.holds(f)))
             .cloned()
             .collect();
@@ -191,6 +193,10 @@ pub(super) fn new_facts(robot: u32, then: Vec<Fact>, held: impl Fn(&Fact) -> boo
 pub(super) fn changes_its_objects(now: &World, after: &World, target: &Action) -> bool {
     gained(now, after, target).iter().any(|f| !is_edge(f, &[Relation::Close]))
 }
+
+/// How many times one goal line is offered to the root again after later steps undid it: the
+/// cap bounds the run (two lines whose ways undo each other cannot go on forever).
+pub(super) const REOFFERS: usize = 3;
 
 /// Whether a fact of `facts` that holds `now` does not hold `after`.
 pub(super) fn makes_false(now: &World, after: &World, facts: &[Fact]) -> bool {

@@ -1135,7 +1135,7 @@ fn a_target_whose_way_undoes_a_kept_relation_is_not_offered() {
 }
 
 #[test]
-fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again_once() {
+fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again() {
     use crate::world::vocab::{Relation, State};
     let closed = "fridge is CLOSED";
     let go = |keep_goals: bool| {
@@ -1422,4 +1422,48 @@ fn below_a_left_hand_line_with_the_right_hand_free_something_else_is_grabbed_fir
     let (_, m, held) = go(false, &["action: [GRAB] <apple> (12)", "done"]);
     assert!(!m.grammars[0].contains("<milk> (13)"), "{}", m.grammars[0]);
     assert_eq!(held, [(Relation::HoldsRh, 12)]);
+}
+
+#[test]
+fn a_goal_line_undone_again_after_it_was_offered_again_is_offered_once_more() {
+    use crate::world::vocab::{Relation, State};
+    let closed = "fridge is CLOSED";
+    let bread = "bread is INSIDE to fridge";
+    let mut m = Scripted::new(&[
+        &format!("subgoal: {closed}"),
+        "action: [WALK] <fridge> (10)",
+        "done",
+        &format!("subgoal: {APPLE_IN_FRIDGE}"),
+        // The apple's target's way opens the fridge: its line is offered again.
+        "action: [PUTIN] <apple> (12) <fridge> (10)",
+        "done",
+        &format!("subgoal: {closed}"),
+        "action: [CLOSE] <fridge> (10)",
+        "done",
+        // The bread's line (the only one left: taken without a call); its way opens the fridge
+        // again, and the fridge's line comes back a second time.
+        "action: [PUTIN] <bread> (14) <fridge> (10)",
+        "done",
+        "action: [CLOSE] <fridge> (10)",
+        "done",
+    ]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest {
+        kept: vec![
+            Fact::State { id: 10, state: State::Closed },
+            Fact::Edge { from: 12, relation: Relation::Inside, to: 10 },
+            Fact::Edge { from: 14, relation: Relation::Inside, to: 10 },
+        ],
+        ..offered(&[closed, APPLE_IN_FRIDGE, bread])
+    };
+    let cfg = PlannerConfig { lines_done_at: None, ..defaults() };
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done);
+    let lines = plan_lines(&out);
+    let closes = lines.iter().filter(|l| *l == "[CLOSE] <fridge> (10)").count();
+    assert_eq!(closes, 2, "{lines:?}");
+    assert_eq!(lines.last().map(String::as_str), Some("[CLOSE] <fridge> (10)"), "{lines:?}");
+    assert_eq!(m.answers.len(), 0, "every answer was asked for");
+    let w = env.world().unwrap();
+    assert!(w.holds(&Fact::State { id: 10, state: State::Closed }) && w.holds(&Fact::Edge { from: 14, relation: Relation::Inside, to: 10 }));
 }
