@@ -231,9 +231,10 @@ pub struct PlannerConfig {
     /// closed fridge that is to stay closed may be opened to put the apple in, and closed again by
     /// its own line). A line met when done that a later line's way made false is offered to the
     /// root again, each time, up to three times. A hold not yet met reserves its hand: no step
-    /// fills that hand with another object or puts the object in the other hand, a left hand's line waits for the right
-    /// hand's (GRAB fills the right hand first), and below a left hand's line with the right hand
-    /// free, grabbing another object of the focus is offered as the way to it. The random planner
+    /// fills that hand with another object or puts the object in the other hand, a left hand's
+    /// line waits for the right hand's (GRAB fills the right hand first), and below a left hand's
+    /// line with the right hand free, grabbing another object of the focus is offered as the way
+    /// to it. The random planner
     /// obeys it too. It reads the goal lines the protocol shows, and never decides when to stop.
     /// It applies where the protocol shows goals at all: a task whose goals are only closeness and
     /// actions keeps no fact but is under its rules (`skip_idle`, `lines_done_at`) all the same.
