@@ -1134,13 +1134,25 @@ fn a_target_whose_way_undoes_a_kept_relation_is_not_offered() {
     assert!(!putin_named(&m.grammars[0]), "{}", m.grammars[0]);
 }
 
+/// Plans the demo kitchen with `lines` offered and `kept` kept (unless `keep_goals` is off),
+/// the model answering `script`: for the tests of lines offered again.
+fn with_kept_lines(script: &[&str], lines: &[&str], kept: Vec<Fact>, keep_goals: bool) -> (PlanOutcome, Scripted, SimEnv) {
+    let mut m = Scripted::new(script);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest { kept, ..offered(lines) };
+    let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    (out, m, env)
+}
+
 #[test]
 fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again() {
     use crate::world::vocab::{Relation, State};
     let closed = "fridge is CLOSED";
+    let take = format!("subgoal: {closed}");
     let go = |keep_goals: bool| {
-        let mut m = Scripted::new(&[
-            &format!("subgoal: {closed}"),
+        let script = [
+            take.as_str(),
             "action: [WALK] <fridge> (10)",
             "done",
             // The apple's line: its target's way opens the fridge.
@@ -1149,27 +1161,18 @@ fn a_goal_line_met_and_later_undone_by_another_lines_way_is_offered_again() {
             // The fridge's line again (the only line left: taken without a call).
             "action: [CLOSE] <fridge> (10)",
             "done",
-        ]);
-        let mut env = SimEnv::new(World::demo(), vec![]);
-        let req = PlanRequest {
-            kept: vec![
-                Fact::State { id: 10, state: State::Closed },
-                Fact::Edge { from: 12, relation: Relation::Inside, to: 10 },
-            ],
-            ..offered(&[closed, APPLE_IN_FRIDGE])
-        };
-        let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
-        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
-        (out, m)
+        ];
+        let kept = vec![Fact::State { id: 10, state: State::Closed }, Fact::Edge { from: 12, relation: Relation::Inside, to: 10 }];
+        with_kept_lines(&script, &[closed, APPLE_IN_FRIDGE], kept, keep_goals)
     };
-    let (out, m) = go(true);
+    let (out, m, _) = go(true);
     assert_eq!(out.stop, StopCause::Done);
     let lines = plan_lines(&out);
     assert!(lines.contains(&"[OPEN] <fridge> (10)".to_string()), "{lines:?}");
     assert_eq!(lines.last().map(String::as_str), Some("[CLOSE] <fridge> (10)"), "{lines:?}");
     assert_eq!(m.answers.len(), 0, "every answer was asked for");
     // Without kept goals the line is not offered again: the fridge stays open.
-    let (out, _) = go(false);
+    let (out, _, _) = go(false);
     assert_ne!(plan_lines(&out).last().map(String::as_str), Some("[CLOSE] <fridge> (10)"));
 }
 
@@ -1429,15 +1432,16 @@ fn a_goal_line_undone_again_after_it_was_offered_again_is_offered_once_more() {
     use crate::world::vocab::{Relation, State};
     let closed = "fridge is CLOSED";
     let bread = "bread is INSIDE to fridge";
-    let mut m = Scripted::new(&[
-        &format!("subgoal: {closed}"),
+    let (take, apple) = (format!("subgoal: {closed}"), format!("subgoal: {APPLE_IN_FRIDGE}"));
+    let script = [
+        take.as_str(),
         "action: [WALK] <fridge> (10)",
         "done",
-        &format!("subgoal: {APPLE_IN_FRIDGE}"),
+        &apple,
         // The apple's target's way opens the fridge: its line is offered again.
         "action: [PUTIN] <apple> (12) <fridge> (10)",
         "done",
-        &format!("subgoal: {closed}"),
+        &take,
         "action: [CLOSE] <fridge> (10)",
         "done",
         // The bread's line (the only one left: taken without a call); its way opens the fridge
@@ -1446,18 +1450,13 @@ fn a_goal_line_undone_again_after_it_was_offered_again_is_offered_once_more() {
         "done",
         "action: [CLOSE] <fridge> (10)",
         "done",
-    ]);
-    let mut env = SimEnv::new(World::demo(), vec![]);
-    let req = PlanRequest {
-        kept: vec![
-            Fact::State { id: 10, state: State::Closed },
-            Fact::Edge { from: 12, relation: Relation::Inside, to: 10 },
-            Fact::Edge { from: 14, relation: Relation::Inside, to: 10 },
-        ],
-        ..offered(&[closed, APPLE_IN_FRIDGE, bread])
-    };
-    let cfg = PlannerConfig { lines_done_at: None, ..defaults() };
-    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    ];
+    let kept = vec![
+        Fact::State { id: 10, state: State::Closed },
+        Fact::Edge { from: 12, relation: Relation::Inside, to: 10 },
+        Fact::Edge { from: 14, relation: Relation::Inside, to: 10 },
+    ];
+    let (out, m, env) = with_kept_lines(&script, &[closed, APPLE_IN_FRIDGE, bread], kept, true);
     assert_eq!(out.stop, StopCause::Done);
     let lines = plan_lines(&out);
     let closes = lines.iter().filter(|l| *l == "[CLOSE] <fridge> (10)").count();
