@@ -234,10 +234,10 @@ pub struct PlannerConfig {
     /// fills that hand with another object or puts the object in the other hand, a left hand's
     /// line waits for the right hand's (GRAB fills the right hand first), and below a left hand's
     /// line with the right hand free, grabbing another object of the focus is offered as the way
-    /// to it. The random planner
-    /// obeys it too. It reads the goal lines the protocol shows, and never decides when to stop.
-    /// It applies where the protocol shows goals at all: a task whose goals are only closeness and
-    /// actions keeps no fact but is under its rules (`skip_idle`, `lines_done_at`) all the same.
+    /// to it. The random planner obeys it too. It reads the goal lines the protocol shows, and
+    /// never decides when to stop. It applies where the protocol shows goals at all: a task whose
+    /// goals are only closeness and actions keeps no fact but is under its rules (`skip_idle`,
+    /// `lines_done_at`) all the same.
     pub keep_goals: bool,
     /// Where the task's goals are kept, do not offer a step that changes nothing among its objects
     /// and the robot (LOOKAT, TOUCH, WASH of a clean plate): no state or relation can come of it.

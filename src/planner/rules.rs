@@ -83,11 +83,11 @@ impl Run<'_> {
     pub(super) fn waits_for_its_hand(&self, line: &str, tried: &[String]) -> bool {
         let (Some(x), Some(w)) = (self.left_hold_before_right(line), self.env.world()) else { return false };
         self.goals.kept.iter().any(|g| {
+            if !matches!(*g, Fact::Edge { relation: Relation::HoldsRh, to: y, .. } if y != x) || w.holds(g) {
+                return false;
+            }
             let right_line = w.describe(g);
-            matches!(*g, Fact::Edge { relation: Relation::HoldsRh, to: y, .. } if y != x)
-                && !w.holds(g)
-                && !tried.contains(&right_line)
-                && self.goals.lines.contains(&right_line)
+            !tried.contains(&right_line) && self.goals.lines.contains(&right_line)
         })
     }
 

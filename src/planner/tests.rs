@@ -1135,7 +1135,7 @@ fn a_target_whose_way_undoes_a_kept_relation_is_not_offered() {
 }
 
 /// Plans the demo kitchen with `lines` offered and `kept` kept (unless `keep_goals` is off),
-/// the model answering `script`: for the tests of lines offered again.
+/// the model answering `script`: for the tests of the kept-goal rules.
 fn with_kept_lines(script: &[&str], lines: &[&str], kept: Vec<Fact>, keep_goals: bool) -> (PlanOutcome, Scripted, SimEnv) {
     let mut m = Scripted::new(script);
     let mut env = SimEnv::new(World::demo(), vec![]);
@@ -1406,12 +1406,8 @@ fn below_a_left_hand_line_with_the_right_hand_free_something_else_is_grabbed_fir
     use crate::world::vocab::Relation;
     let line = "character is HOLDS_LH to apple";
     let go = |keep_goals: bool, answers: &[&str]| {
-        let mut m = Scripted::new(answers);
-        let mut env = SimEnv::new(World::demo(), vec![]);
         let kept = vec![Fact::Edge { from: 3, relation: Relation::HoldsLh, to: 12 }];
-        let req = PlanRequest { kept, ..offered(&[line]) };
-        let cfg = PlannerConfig { keep_goals, lines_done_at: None, ..defaults() };
-        let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+        let (out, m, env) = with_kept_lines(answers, &[line], kept, keep_goals);
         (out, m, env.world().map(|w| w.held()).unwrap_or_default())
     };
     // The line names the apple only, yet the milk may be grabbed (into the right hand); then the
