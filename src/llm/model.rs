@@ -580,8 +580,8 @@ impl HeadBlock<'_> {
         self.run::<super::kernels::attn::Avx2>(rows, sc)
     }
 
-    /// The same code with the AVX-512 weighted sums (the AVX2 softmax), compiled with AVX-512F;
-    /// the same bits again.
+    /// The same code with the AVX-512 softmax and weighted sums, compiled with AVX-512F; the same
+    /// bits again.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,avx512f")]
     unsafe fn run_avx512(&self, rows: std::ops::Range<usize>, sc: &mut [f32]) {

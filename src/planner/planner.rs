@@ -21,7 +21,7 @@ use sha2::{Digest, Sha256};
 use super::decompose::{named_objects, Proposed};
 use super::goals::{self, Goals};
 use super::env::{Env, Outcome};
-use super::prompt::{NodeView, Prompter};
+use super::prompt::{NodeView, Prompter, StateLog};
 use super::rules::new_facts;
 use super::terminate::echoes;
 use super::trace::TraceWriter;
@@ -139,6 +139,8 @@ pub(crate) struct Run<'a> {
     pub(super) last_change: Vec<Fact>,
     /// The root's goal lines: shown by the protocol, or candidates the model chooses among.
     pub(super) goals: Goals,
+    /// The state at the start (in the task part of every prompt) and what changed since.
+    pub(super) states: StateLog,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -158,7 +160,9 @@ pub(crate) fn run_tree(
         let n = w.nodes().filter(|n| n.id != w.character()).count();
         focus.iter().filter(|&&id| id != w.character()).count() >= n
     });
+    let start_state = env.observe(cfg.observe_budget);
     let mut run = Run {
+        states: StateLog::new(&start_state),
         focus_is_scene,
         last_change: Vec::new(),
         model,
@@ -167,7 +171,7 @@ pub(crate) fn run_tree(
         cfg,
         trace,
         mode: ContextMode::of(cfg.kind),
-        prompter: Prompter::new(&req.instruction, req.context.as_deref()),
+        prompter: Prompter::new(&req.instruction, req.context.as_deref()).with_start_state(&start_state),
         focus,
         tree: SubgoalTree::new(&req.instruction),
         stats: PlanStats::default(),
@@ -323,8 +327,10 @@ impl Run<'_> {
     }
 
     /// The context of a decision at `node`.
-    pub(super) fn view(&self, node: NodeId, previous: Option<&str>, rejected: Option<&str>) -> NodeView {
-        let observation = self.env.observe(self.cfg.observe_budget);
+    pub(super) fn view(&mut self, node: NodeId, previous: Option<&str>, rejected: Option<&str>) -> NodeView {
+        // The view as bounded at the start: the objects it leaves out (the building's floors and
+        // walls first) are left out of the changes too, as they were of the whole state.
+        let observation = self.states.since(&self.env.observe(self.cfg.observe_budget), self.cfg.observe_budget);
         let history = || Some(self.executed.iter().map(|a| a.to_string()).collect());
         match self.mode {
             ContextMode::Step => NodeView {

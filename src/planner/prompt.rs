@@ -7,6 +7,12 @@
 //! output) token for token and is almost entirely reused. Within the node's part the observation comes
 //! first: it changes only when an action runs, while the goal, previous step and rejection change on
 //! every move through the tree.
+//!
+//! The state is shown in two parts (`StateLog`): the state at the start, in the task part (read once
+//! a run), and after it only the object lines that changed since, the last changed last, then the
+//! robot. A full state rewritten after every action made each action's first call recompute every
+//! line below the first changed one; now a changed object's line moves to the end, and what is
+//! recomputed is mostly that line, the robot's and the node's own part.
 
 use crate::action::Verb;
 use crate::llm::chat::Message;
@@ -61,6 +67,9 @@ pub struct NodeView {
 pub struct Prompter {
     system: String,
     task: String,
+    /// The task part ends with the state at the start ([`Prompter::with_start_state`]), and each
+    /// node's observation is what changed since.
+    since_start: bool,
 }
 
 impl Prompter {
@@ -70,7 +79,17 @@ impl Prompter {
             task.push_str(c);
             task.push('\n');
         }
-        Prompter { system: system_message(), task }
+        Prompter { system: system_message(), task, since_start: false }
+    }
+
+    /// The same prompts, with the state at the start (`observation`, as `Env::observe` writes it)
+    /// at the end of the task part; each node's observation is then [`StateLog::since`]'s.
+    pub fn with_start_state(mut self, observation: &str) -> Prompter {
+        self.task.push_str("State at the start:\n");
+        self.task.push_str(observation.trim_end());
+        self.task.push_str("\nState now (the objects changed since the start, then the robot):\n");
+        self.since_start = true;
+        self
     }
 
     /// The same prompts, with the worked examples of a root setting its own goals in the system
@@ -95,7 +114,9 @@ impl Prompter {
 
     fn node_text(&self, v: &NodeView) -> String {
         let mut s = self.task.clone();
-        s.push_str("State:\n");
+        if !self.since_start {
+            s.push_str("State:\n");
+        }
         s.push_str(v.observation.trim_end());
         s.push('\n');
         s.push_str(&format!("Goal: {}\n", v.goal));
@@ -139,9 +160,141 @@ impl Prompter {
     }
 }
 
+/// The state a run's decisions see after its start: the object lines that differ from the start's,
+/// the most recently changed last (an object changed back to its start keeps its place until it
+/// changes again), then the robot's line as it is now. Lines are those `World::observe` writes:
+/// `<name> (id): ...` for an object, `robot: ...`; its count of lines cut by the budget is left
+/// out (it says how much of the whole state a view shows, and changes as lines grow).
+#[derive(Clone, Debug, Default)]
+pub struct StateLog {
+    start: Vec<String>,
+    /// Objects (their `<name> (id)` label) whose line differs from the start's, the one that
+    /// changed last at the end.
+    changed: Vec<String>,
+    /// The object lines shown last time.
+    shown: Vec<String>,
+}
+
+/// The object an observation line is about: its `<name> (id)` label, or `None` for other lines.
+fn object_of(line: &str) -> Option<&str> {
+    if !line.starts_with('<') {
+        return None;
+    }
+    line.find("):").map(|i| &line[..i + 1])
+}
+
+impl StateLog {
+    pub fn new(start: &str) -> StateLog {
+        StateLog { start: start.lines().map(str::to_string).collect(), changed: Vec::new(), shown: Vec::new() }
+    }
+
+    /// What changed since the start in the observation `now` (see [`StateLog`]), the object lines
+    /// in at most `budget` bytes: the oldest changes are left out first, and counted.
+    pub fn since(&mut self, now: &str, budget: usize) -> String {
+        let start_line = |o: &str| self.start.iter().find(|l| object_of(l) == Some(o)).cloned();
+        // An object whose line differs from the one shown last time (or, the first time, from the
+        // start's) moves to the end, so an object changed again and again is rewritten alone.
+        let mut moved = Vec::new();
+        for l in now.lines() {
+            if let Some(o) = object_of(l) {
+                let before = match self.shown.iter().find(|s| object_of(s) == Some(o)) {
+                    Some(s) => Some(s.clone()),
+                    None => start_line(o),
+                };
+                if before.as_deref() != Some(l) {
+                    moved.push(o.to_string());
+                }
+            }
+        }
+        self.changed.retain(|c| !moved.contains(c));
+        self.changed.extend(moved);
+        let mut lines: Vec<&str> = Vec::new();
+        for o in &self.changed {
+            lines.extend(now.lines().filter(|l| object_of(l) == Some(o.as_str())));
+        }
+        self.shown = lines.iter().map(|l| l.to_string()).collect();
+        let mut bytes: usize = lines.iter().map(|l| l.len() + 1).sum();
+        let mut cut = 0;
+        while bytes > budget && cut < lines.len() {
+            bytes -= lines[cut].len() + 1;
+            cut += 1;
+        }
+        let mut out: Vec<String> = Vec::new();
+        if cut > 0 {
+            out.push(format!("… ({cut} objects changed earlier not shown)"));
+        }
+        out.extend(lines[cut..].iter().map(|l| l.to_string()));
+        out.extend(now.lines().filter(|l| l.starts_with("robot:")).map(str::to_string));
+        out.join("\n")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_state_log_shows_changed_objects_the_last_changed_last() {
+        let start = "<fridge> (10): CLOSED\n<apple> (11): on <table> (12)\n<table> (12): CLEAN\n\
+                     robot: in <kitchen> (1); hands empty";
+        let mut log = StateLog::new(start);
+        assert_eq!(log.since(start, 600), "robot: in <kitchen> (1); hands empty");
+        let now = "<fridge> (10): CLOSED\n<apple> (11): held by the robot (right hand)\n<table> (12): CLEAN\n\
+                   robot: in <kitchen> (1); holding <apple> (11) (right hand)";
+        assert_eq!(log.since(now, 600), "<apple> (11): held by the robot (right hand)\nrobot: in <kitchen> (1); holding <apple> (11) (right hand)");
+        // The fridge changes after the apple: its line comes after the apple's, although its id
+        // is smaller, so the prompt up to the apple's line is unchanged.
+        let now = "<fridge> (10): OPEN\n<apple> (11): held by the robot (right hand)\n<table> (12): CLEAN\n\
+                   robot: in <kitchen> (1); holding <apple> (11) (right hand)";
+        assert_eq!(
+            log.since(now, 600),
+            "<apple> (11): held by the robot (right hand)\n<fridge> (10): OPEN\nrobot: in <kitchen> (1); holding <apple> (11) (right hand)"
+        );
+        // The apple changes again: it moves after the fridge.
+        let now = "<fridge> (10): OPEN\n<apple> (11): in <fridge> (10)\n<table> (12): CLEAN\nrobot: in <kitchen> (1); hands empty";
+        assert_eq!(log.since(now, 600), "<fridge> (10): OPEN\n<apple> (11): in <fridge> (10)\nrobot: in <kitchen> (1); hands empty");
+        // The fridge changes back to its start: still shown, now last.
+        let now = "<fridge> (10): CLOSED\n<apple> (11): in <fridge> (10)\n<table> (12): CLEAN\nrobot: in <kitchen> (1); hands empty";
+        assert_eq!(log.since(now, 600), "<apple> (11): in <fridge> (10)\n<fridge> (10): CLOSED\nrobot: in <kitchen> (1); hands empty");
+        // Nothing changed: the same lines in the same order.
+        assert_eq!(log.since(now, 600), "<apple> (11): in <fridge> (10)\n<fridge> (10): CLOSED\nrobot: in <kitchen> (1); hands empty");
+    }
+
+    #[test]
+    fn the_state_log_leaves_out_the_oldest_changes_beyond_its_budget() {
+        let start = "<fridge> (10): CLOSED\n<apple> (11): on <table> (12)\nrobot: in <kitchen> (1)";
+        let mut log = StateLog::new(start);
+        let now = "<fridge> (10): OPEN\n<apple> (11): on <table> (12)\nrobot: in <kitchen> (1)";
+        log.since(now, 30);
+        let now = "<fridge> (10): OPEN\n<apple> (11): held by the robot (right hand)\nrobot: in <kitchen> (1)";
+        assert_eq!(
+            log.since(now, 50),
+            "… (1 objects changed earlier not shown)\n<apple> (11): held by the robot (right hand)\nrobot: in <kitchen> (1)"
+        );
+        assert_eq!(
+            log.since(now, 80),
+            "<fridge> (10): OPEN\n<apple> (11): held by the robot (right hand)\nrobot: in <kitchen> (1)"
+        );
+    }
+
+    #[test]
+    fn the_state_log_leaves_out_the_views_cut_marker() {
+        let start = "<fridge> (10): CLOSED\n… (2 more lines not shown)\nrobot: in <kitchen> (1)";
+        let mut log = StateLog::new(start);
+        assert_eq!(log.since(start, 600), "robot: in <kitchen> (1)");
+        let now = "<fridge> (10): OPEN\n… (3 more lines not shown)\nrobot: in <kitchen> (1)";
+        assert_eq!(log.since(now, 600), "<fridge> (10): OPEN\nrobot: in <kitchen> (1)");
+    }
+
+    #[test]
+    fn a_prompt_with_the_start_state_begins_with_the_task_read_before_the_first_node() {
+        let p = Prompter::new("put the apple in the fridge", None).with_start_state("<fridge> (10): CLOSED\nrobot: in <kitchen> (1)");
+        let v = NodeView { observation: "robot: in <kitchen> (1)".into(), goal: "fridge is OPEN".into(), ..Default::default() };
+        let Prompt::Chat(d) = p.decompose(&v) else { panic!("chat prompt expected") };
+        assert!(d[1].content.starts_with(p.task()), "{}", d[1].content);
+        assert!(p.task().contains("State at the start:\n<fridge> (10): CLOSED\nrobot: in <kitchen> (1)\n"), "{}", p.task());
+        assert!(d[1].content.ends_with("robot: in <kitchen> (1)\nGoal: fridge is OPEN\nNext step?"), "{}", d[1].content);
+    }
 
     #[test]
     fn the_embodiment_lists_every_verb_once() {

@@ -188,13 +188,21 @@ impl AttnOps for Avx2 {
     #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
         let (n, x) = (row.len(), row.as_mut_ptr());
-        // The maximum: any order gives the same value.
-        let mut m8 = _mm256_set1_ps(f32::NEG_INFINITY);
+        // The maximum: any order gives the same value, so four independent chains (one chain
+        // waited on each max's latency: a tenth of attention's float time).
+        let mut m = [_mm256_set1_ps(f32::NEG_INFINITY); 4];
         let mut c = 0;
+        while c + 32 <= n {
+            for (u, mu) in m.iter_mut().enumerate() {
+                *mu = _mm256_max_ps(*mu, _mm256_loadu_ps(x.add(c + 8 * u)));
+            }
+            c += 32;
+        }
         while c + 8 <= n {
-            m8 = _mm256_max_ps(m8, _mm256_loadu_ps(x.add(c)));
+            m[0] = _mm256_max_ps(m[0], _mm256_loadu_ps(x.add(c)));
             c += 8;
         }
+        let m8 = _mm256_max_ps(_mm256_max_ps(m[0], m[1]), _mm256_max_ps(m[2], m[3]));
         let mut lanes = [0f32; 8];
         _mm256_storeu_ps(lanes.as_mut_ptr(), m8);
         let max = row[c..].iter().chain(&lanes).fold(f32::NEG_INFINITY, |m, &s| m.max(s));
@@ -259,7 +267,9 @@ impl AttnOps for Avx2 {
     }
 }
 
-/// AVX-512 (F): the AVX2 softmax, and weighted sums that share each value row between up to
+/// AVX-512 (F): the softmax sixteen lanes wide, its sum still in the AVX2 loop's eight lanes and
+/// order (each sixteen exponentials are added as their first eight, then their last eight), and
+/// weighted sums that share each value row between up to
 /// [`SUMS`] (row, head) pairs: per key, four 16-wide loads feed sixteen fused multiply-adds, where
 /// the AVX2 loop loads a row once for every eight. Each element is still one chain of fmas over the
 /// keys in order, so the bits are the portable loop's. Only to be used where the CPU has AVX-512F.
@@ -268,6 +278,27 @@ pub struct Avx512;
 
 #[cfg(target_arch = "x86_64")]
 impl Avx512 {
+    /// [`Avx2::exp_le0`] on sixteen lanes, each operation as there.
+    #[inline(always)]
+    unsafe fn exp_le0(v: __m512) -> __m512 {
+        let k = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(_mm512_mul_ps(
+            v,
+            _mm512_set1_ps(std::f32::consts::LOG2_E),
+        ));
+        let r = _mm512_fmadd_ps(k, _mm512_set1_ps(-LN2_LO), _mm512_fmadd_ps(k, _mm512_set1_ps(-LN2_HI), v));
+        let one = _mm512_set1_ps(1.0);
+        let mut p = _mm512_set1_ps(EXP_POLY[0]);
+        for co in &EXP_POLY[1..] {
+            p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(*co));
+        }
+        p = _mm512_fmadd_ps(p, r, one);
+        p = _mm512_fmadd_ps(p, r, one);
+        let scale =
+            _mm512_castsi512_ps(_mm512_slli_epi32::<23>(_mm512_add_epi32(_mm512_cvtps_epi32(k), _mm512_set1_epi32(127))));
+        // +0 where not v ≥ floor (NaN included), as the AVX2 mask.
+        _mm512_maskz_mul_ps(_mm512_cmp_ps_mask::<_CMP_GE_OQ>(v, _mm512_set1_ps(EXP_FLOOR)), p, scale)
+    }
+
     /// `N` outputs over `keys` rows: 64 elements at a time in four registers each, then 16 at a
     /// time, then the tail element by element.
     #[inline(always)]
@@ -330,7 +361,53 @@ impl Avx512 {
 impl AttnOps for Avx512 {
     #[inline(always)]
     unsafe fn softmax(row: &mut [f32]) {
-        Avx2::softmax(row)
+        let (n, x) = (row.len(), row.as_mut_ptr());
+        let mut m = [_mm512_set1_ps(f32::NEG_INFINITY); 4];
+        let mut c = 0;
+        while c + 64 <= n {
+            for (u, mu) in m.iter_mut().enumerate() {
+                *mu = _mm512_max_ps(*mu, _mm512_loadu_ps(x.add(c + 16 * u)));
+            }
+            c += 64;
+        }
+        while c + 16 <= n {
+            m[0] = _mm512_max_ps(m[0], _mm512_loadu_ps(x.add(c)));
+            c += 16;
+        }
+        let mut lanes = [0f32; 16];
+        _mm512_storeu_ps(lanes.as_mut_ptr(), _mm512_max_ps(_mm512_max_ps(m[0], m[1]), _mm512_max_ps(m[2], m[3])));
+        let max = row[c..].iter().chain(&lanes).fold(f32::NEG_INFINITY, |m, &s| m.max(s));
+        let maxv = _mm512_set1_ps(max);
+        let mut acc = _mm256_setzero_ps();
+        let mut c = 0;
+        while c + 16 <= n {
+            let e = Self::exp_le0(_mm512_sub_ps(_mm512_loadu_ps(x.add(c)), maxv));
+            _mm512_storeu_ps(x.add(c), e);
+            acc = _mm256_add_ps(acc, _mm512_castps512_ps256(e));
+            acc = _mm256_add_ps(acc, _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(e))));
+            c += 16;
+        }
+        if c + 8 <= n {
+            let e = Avx2::exp_le0(_mm256_sub_ps(_mm256_loadu_ps(x.add(c)), _mm256_set1_ps(max)));
+            _mm256_storeu_ps(x.add(c), e);
+            acc = _mm256_add_ps(acc, e);
+            c += 8;
+        }
+        let mut lanes = [0f32; 8];
+        _mm256_storeu_ps(lanes.as_mut_ptr(), acc);
+        let mut sum = reduce_lanes(&lanes);
+        for e in row[c..].iter_mut() {
+            *e = exp_le0(*e - max);
+            sum += *e;
+        }
+        let inv = 1.0 / sum;
+        let invv = _mm512_set1_ps(inv);
+        let mut c = 0;
+        while c + 16 <= n {
+            _mm512_storeu_ps(x.add(c), _mm512_mul_ps(_mm512_loadu_ps(x.add(c)), invv));
+            c += 16;
+        }
+        row[c..].iter_mut().for_each(|p| *p *= inv);
     }
 
     #[inline(always)]

@@ -204,8 +204,9 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
     }
     let mut rng = StdRng::seed_from_u64(13);
     for hd in [64, 128, 72, 12] {
-        for n in [1, 5, 8, 37, 2000] {
-            let row: Vec<f32> = randn(&mut rng, n).iter().map(|x| x * 9.0).collect();
+        // Spreads of ~±30 and ~±120: the second puts many exponentials below the floor (0).
+        for (n, spread) in [1, 5, 8, 16, 24, 37, 64, 100, 2000].into_iter().flat_map(|n| [(n, 9.0), (n, 40.0)]) {
+            let row: Vec<f32> = randn(&mut rng, n).iter().map(|x| x * spread).collect();
             let (mut x, mut y) = (row.clone(), row.clone());
             // SAFETY: as above.
             unsafe {
@@ -213,6 +214,12 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
                 attn::Avx2::softmax(&mut y);
             }
             assert!(x.iter().zip(&y).all(|(a, b)| a.to_bits() == b.to_bits()), "softmax of {n}");
+            if avx512::available() {
+                let mut z = row.clone();
+                // SAFETY: the CPU has AVX-512F.
+                unsafe { attn::Avx512::softmax(&mut z) };
+                assert!(x.iter().zip(&z).all(|(a, b)| a.to_bits() == b.to_bits()), "AVX-512 softmax of {n}");
+            }
             let total: f64 = x.iter().map(|&p| p as f64).sum();
             assert!((total - 1.0).abs() < 1e-5, "softmax of {n} sums to {total}");
         }
