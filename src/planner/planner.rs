@@ -171,7 +171,7 @@ pub(crate) fn run_tree(
         cfg,
         trace,
         mode: ContextMode::of(cfg.kind),
-        prompter: Prompter::new(&req.instruction, req.context.as_deref()).with_start_state(&start_state),
+        prompter: Prompter::new(&req.instruction, req.context.as_deref(), &start_state),
         focus,
         tree: SubgoalTree::new(&req.instruction),
         stats: PlanStats::default(),

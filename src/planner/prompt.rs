@@ -45,7 +45,7 @@ pub fn system_message() -> String {
 /// What a decision at one node sees, besides the task.
 #[derive(Clone, Debug, Default)]
 pub struct NodeView {
-    /// The current state, bounded.
+    /// What changed since the start, and the robot ([`StateLog::since`]).
     pub observation: String,
     /// The goal being decomposed (the parent; the root's instruction in `no-subgoal-tree`).
     pub goal: String,
@@ -67,29 +67,21 @@ pub struct NodeView {
 pub struct Prompter {
     system: String,
     task: String,
-    /// The task part ends with the state at the start ([`Prompter::with_start_state`]), and each
-    /// node's observation is what changed since.
-    since_start: bool,
 }
 
 impl Prompter {
-    pub fn new(instruction: &str, context: Option<&str>) -> Prompter {
+    /// The task part ends with the state at the start (`start_state`, as `Env::observe` writes
+    /// it); each node's observation is then [`StateLog::since`]'s.
+    pub fn new(instruction: &str, context: Option<&str>, start_state: &str) -> Prompter {
         let mut task = format!("Task: {}\n", instruction.trim());
         if let Some(c) = context.map(str::trim).filter(|c| !c.is_empty()) {
             task.push_str(c);
             task.push('\n');
         }
-        Prompter { system: system_message(), task, since_start: false }
-    }
-
-    /// The same prompts, with the state at the start (`observation`, as `Env::observe` writes it)
-    /// at the end of the task part; each node's observation is then [`StateLog::since`]'s.
-    pub fn with_start_state(mut self, observation: &str) -> Prompter {
-        self.task.push_str("State at the start:\n");
-        self.task.push_str(observation.trim_end());
-        self.task.push_str("\nState now (the objects changed since the start, then the robot):\n");
-        self.since_start = true;
-        self
+        task.push_str("State at the start:\n");
+        task.push_str(start_state.trim_end());
+        task.push_str("\nState now (the objects changed since the start, then the robot):\n");
+        Prompter { system: system_message(), task }
     }
 
     /// The same prompts, with the worked examples of a root setting its own goals in the system
@@ -114,9 +106,6 @@ impl Prompter {
 
     fn node_text(&self, v: &NodeView) -> String {
         let mut s = self.task.clone();
-        if !self.since_start {
-            s.push_str("State:\n");
-        }
         s.push_str(v.observation.trim_end());
         s.push('\n');
         s.push_str(&format!("Goal: {}\n", v.goal));
@@ -288,7 +277,7 @@ mod tests {
 
     #[test]
     fn a_prompt_with_the_start_state_begins_with_the_task_read_before_the_first_node() {
-        let p = Prompter::new("put the apple in the fridge", None).with_start_state("<fridge> (10): CLOSED\nrobot: in <kitchen> (1)");
+        let p = Prompter::new("put the apple in the fridge", None, "<fridge> (10): CLOSED\nrobot: in <kitchen> (1)");
         let v = NodeView { observation: "robot: in <kitchen> (1)".into(), goal: "fridge is OPEN".into(), ..Default::default() };
         let Prompt::Chat(d) = p.decompose(&v) else { panic!("chat prompt expected") };
         assert!(d[1].content.starts_with(p.task()), "{}", d[1].content);
@@ -309,7 +298,7 @@ mod tests {
 
     #[test]
     fn terminate_extends_decompose() {
-        let p = Prompter::new("put the apple in the fridge", None);
+        let p = Prompter::new("put the apple in the fridge", None, "robot: in kitchen");
         let v = NodeView {
             observation: "robot: in kitchen".into(),
             goal: "put the apple in the fridge".into(),
