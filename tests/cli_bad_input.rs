@@ -311,6 +311,14 @@ fn a_blank_instruction_is_an_error_before_the_model_loads() {
 }
 
 #[test]
+fn an_unwritable_dot_path_is_an_error_before_the_model_loads() {
+    // It was found only after the whole run, which then ended without printing its plan.
+    let o = run(&["plan", "put the apple in the fridge", "--dot", "/nonexistent-dir/tree.dot", "-m", "/nonexistent.gguf"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("creating DOT file /nonexistent-dir/tree.dot"), "{}", stderr(&o));
+}
+
+#[test]
 fn deadline_and_action_timeout_are_seconds_above_zero() {
     // `--deadline nan` once reached Duration::from_secs_f64 and panicked.
     for flag in ["--deadline", "--action-timeout"] {

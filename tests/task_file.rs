@@ -88,6 +88,18 @@ fn bad_goals_and_gold_plans_are_named() {
 }
 
 #[test]
+fn a_task_without_goals_is_refused_since_any_plan_would_meet_it() {
+    // It once counted as met, so `eval plan` reported 100% task success for any plan.
+    let e = error_of(&task(&kitchen(), "", ""));
+    assert!(e.contains("task 't1'") && e.contains("no goal conditions and no actions"), "{e}");
+    let with_action = r#"{"id": "t1", "scene": "SCENE", "title": "T", "vh_goal": {"goal": [], "actions": ["GRAB"]}}"#;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tasks.json");
+    std::fs::write(&path, format!("[{}]", with_action.replace("SCENE", &kitchen()))).unwrap();
+    assert!(load(&path).is_ok(), "an action goal alone is a goal");
+}
+
+#[test]
 fn bad_files_and_scenes_say_what_is_wrong() {
     let e = error_of(&task("no_such_scene.json", "", ""));
     assert!(e.contains("neither a graph file") && e.contains("no_such_scene.json"), "{e}");

@@ -326,6 +326,10 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !unknown.is_empty() {
         eprintln!("warning: {}", unknown_note(&unknown, &world));
     }
+    // An unwritable --dot path is found before the model loads, not after it (the tree is written at the end).
+    if let Some(p) = &args.dot {
+        std::fs::File::create(p).with_context(|| format!("creating DOT file {}", p.display()))?;
+    }
     let mut env = make_env(&args.env, world, req.focus.clone(), Duration::from_secs_f64(args.action_timeout))?;
     let path = resolve_model(&args.model)?;
     let mut engine = load_engine(&path, &args.inference)?;
@@ -342,13 +346,14 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
         eprintln!("warning: the trace could not be written completely: {e}");
     }
     let goals = task.as_ref().and_then(|t| env.world().map(|w| t.goal.check(w, &out.executed)));
+    // The plan is printed first: a DOT file that cannot be written loses nothing else.
+    report(args.json, &out, goals.as_ref(), &path, &unknown)?;
     if let Some(p) = &args.dot {
         let svg = write_dot(&out.tree.to_dot(), p).with_context(|| format!("writing {}", p.display()))?;
         if let Some(svg) = svg {
             eprintln!("tree: {} and {}", p.display(), svg.display());
         }
     }
-    report(args.json, &out, goals.as_ref(), &path, &unknown)?;
     if let StopCause::Error(e) = &out.stop {
         bail!("the planner stopped on an error: {e}");
     }

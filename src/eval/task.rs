@@ -507,6 +507,15 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
             }
             (None, None, None) => (relevant_by_goal(&world, &goal, None), Relevance::default()),
         };
+        // A task without goals would count as met whatever the plan did.
+        if goal.is_empty() {
+            return Err(task_err(
+                &t.id,
+                "vh_goal has no goal conditions and no actions, so no plan could fail it: add at least one \
+                 (e.g. \"goal\": [{\"from_id\": 12, \"relation_type\": \"INSIDE\", \"to_id\": 10}])"
+                    .into(),
+            ));
+        }
         tasks.push(Task {
             id: t.id,
             title: t.title,
