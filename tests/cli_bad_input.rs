@@ -319,6 +319,15 @@ fn an_unwritable_dot_path_is_an_error_before_the_model_loads() {
 }
 
 #[test]
+fn an_unwritable_export_path_is_an_error_before_the_tasks_run() {
+    let tasks = demo_tasks();
+    let o = run(&["eval", "plan", "--planner", "random", "--tasks-file", &tasks, "--export-eai", "/nonexistent-dir/p.json"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("creating /nonexistent-dir/p.json"), "{}", stderr(&o));
+    assert!(stdout(&o).is_empty(), "no task ran: {}", stdout(&o));
+}
+
+#[test]
 fn deadline_and_action_timeout_are_seconds_above_zero() {
     // `--deadline nan` once reached Duration::from_secs_f64 and panicked.
     for flag in ["--deadline", "--action-timeout"] {

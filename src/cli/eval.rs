@@ -164,6 +164,10 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
     if let Some(d) = &a.trace_dir {
         std::fs::create_dir_all(d).with_context(|| format!("creating the trace directory {}", d.display()))?;
     }
+    // An unwritable export path is found now, not after the whole run.
+    if let Some(p) = &a.export_eai {
+        std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
+    }
     let defaults = PlannerConfig::default();
     let mut cfg = PlanEvalConfig {
         planner: PlannerConfig {
@@ -220,20 +224,21 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    if let Some(p) = &a.export_eai {
-        plans::export_eai(&reports, &tasks, p).with_context(|| format!("writing {}", p.display()))?;
-    }
     let source_name = match &source.tasks_file {
         Some(f) => format!("task file {}", f.display()),
         None => "EAI VirtualHome tasks".to_string(),
     };
     let source_name = if a.every > 1 { format!("{source_name}, every {}th", a.every) } else { source_name };
     let report = PlanEvalReport::new(&cfg, source_name, reports, t0.elapsed().as_secs_f64());
+    // The report first: an export that fails to write loses nothing else.
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print!("{}", report.table());
-        if let Some(p) = &a.export_eai {
+    }
+    if let Some(p) = &a.export_eai {
+        plans::export_eai(&report.tasks, &tasks, p).with_context(|| format!("writing {}", p.display()))?;
+        if !a.json {
             println!("EAI-format plans written to {}", p.display());
         }
     }

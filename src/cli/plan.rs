@@ -462,6 +462,12 @@ fn percentile(xs: &[f64], q: f64) -> f64 {
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     args.inference.apply();
     let recorded = read_trace(&args.trace).map_err(|e| anyhow!(e))?;
+    if let Some(n) = recorded.cut_line {
+        eprintln!(
+            "warning: {}:{n}: the last line is cut off (the run was killed while writing it); replaying the events before it",
+            args.trace.display()
+        );
+    }
     let h = &recorded.header;
     let cfg = PlannerConfig::from_json(&h["settings"]).map_err(|e| anyhow!("{}: {e}", args.trace.display()))?;
     let meta = &h["meta"];

@@ -16,6 +16,8 @@ pub struct TraceFile {
     /// The `end` event (absent when the run was killed).
     pub end: Option<Value>,
     pub events: usize,
+    /// The number of a last line cut off in the middle (a run killed while writing it), left out.
+    pub cut_line: Option<usize>,
 }
 
 /// Reads a trace; errors name the file and line.
@@ -25,13 +27,27 @@ pub fn read_trace(path: &Path) -> Result<TraceFile, String> {
     let mut calls = Vec::new();
     let mut end = None;
     let mut events = 0;
+    let mut cut_line = None;
+    let n_lines = text.lines().count();
     for (i, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
         }
-        let v: Value = serde_json::from_str(line).map_err(|e| {
-            format!("{}:{}: not a trace event ({e}); traces are written by `step plan --trace`", path.display(), i + 1)
-        })?;
+        let v: Value = match serde_json::from_str(line) {
+            Ok(v) => v,
+            // Events are written a whole line at a time, so only a kill can leave half of the last one.
+            Err(e) if e.is_eof() && i + 1 == n_lines && !text.ends_with('\n') => {
+                cut_line = Some(i + 1);
+                break;
+            }
+            Err(e) => {
+                return Err(format!(
+                    "{}:{}: not a trace event ({e}); traces are written by `step plan --trace`",
+                    path.display(),
+                    i + 1
+                ))
+            }
+        };
         events += 1;
         match v.get("event").and_then(Value::as_str) {
             Some("header") => header = Some(v),
@@ -42,7 +58,7 @@ pub fn read_trace(path: &Path) -> Result<TraceFile, String> {
     }
     let header =
         header.ok_or_else(|| format!("{}: no header event (is it a `step plan --trace` file?)", path.display()))?;
-    Ok(TraceFile { header, calls, end, events })
+    Ok(TraceFile { header, calls, end, events, cut_line })
 }
 
 /// Where a re-run differs from the trace (empty: identical; for a trace cut short, identical as
@@ -94,4 +110,29 @@ pub fn compare(recorded: &TraceFile, out: &PlanOutcome) -> Vec<String> {
         }
     }
     diffs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(text: &str) -> Result<TraceFile, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.jsonl");
+        std::fs::write(&p, text).unwrap();
+        read_trace(&p)
+    }
+
+    #[test]
+    fn a_last_line_cut_off_by_a_kill_is_left_out_and_any_other_bad_line_is_an_error() {
+        let head = "{\"event\":\"header\"}\n{\"event\":\"call\",\"output\":\"a\"}\n";
+        let t = read(&format!("{head}{{\"event\":\"call\",\"out")).unwrap();
+        assert_eq!((t.calls.len(), t.cut_line, t.events), (1, Some(3), 2));
+        assert_eq!(read(head).unwrap().cut_line, None);
+        // A whole line (it ends with a newline) that does not parse was not cut by a kill.
+        let e = read(&format!("{head}{{\"event\":\"call\",\"out\n")).unwrap_err();
+        assert!(e.contains("t.jsonl:3: not a trace event"), "{e}");
+        let e = read(&format!("{{\"event\":\"header\"}}\nnot json\n{head}")).unwrap_err();
+        assert!(e.contains("t.jsonl:2: not a trace event"), "{e}");
+    }
 }
