@@ -66,6 +66,8 @@ pub struct BridgeEnv {
     timeout: Duration,
     shadow: World,
     focus: Vec<u32>,
+    /// Of those, the ones listed first ([`Env::view_first`]).
+    first: Vec<u32>,
     transcript: Vec<Exchange>,
     /// Set once the bridge has failed: the error every later action gets.
     dead: Option<String>,
@@ -146,6 +148,7 @@ impl BridgeEnv {
             timeout,
             shadow: scene,
             focus,
+            first: Vec::new(),
             transcript: Vec::new(),
             dead: None,
         })
@@ -228,7 +231,11 @@ impl Env for BridgeEnv {
     }
 
     fn observe(&self, budget: usize) -> String {
-        self.shadow.observe(&self.focus, budget)
+        self.shadow.observe_first(&self.focus, &self.first, budget)
+    }
+
+    fn view_first(&mut self, ids: &[u32]) {
+        self.first = ids.to_vec();
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {

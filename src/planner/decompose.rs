@@ -257,22 +257,17 @@ impl Run<'_> {
             return Ok(self.focus.clone());
         }
         let w = self.world()?;
-        let named = named_objects(w, &self.focus, &self.tree.node(node).text);
+        let text = &self.tree.node(node).text;
+        // The root's text is the user's own words; the others are written from the world's names.
+        let named = if node == self.tree.root() {
+            goals::instruction_objects(w, &self.focus, text)
+        } else {
+            named_objects(w, &self.focus, text)
+        };
         if named.is_empty() {
             return Ok(self.focus.clone());
         }
-        let mut out = named.clone();
-        for (from, r, to) in w.edges() {
-            if named.contains(&from)
-                && matches!(r, Relation::Inside | Relation::On)
-                && self.focus.contains(&to)
-                && !out.contains(&to)
-                && !w.node(to).is_some_and(|n| n.is_room())
-            {
-                out.push(to);
-            }
-        }
-        Ok(out)
+        Ok(with_holders(w, named, &self.focus))
     }
 
     /// The target subgoals a decision at `node` may write: the actions of the
@@ -519,6 +514,23 @@ fn outcome(w: &World, a: &Action, targets: &[Action]) -> Option<World> {
 
 /// The objects of `focus` that `text` names: by class name (a whole word, case-insensitive) or by id
 /// written as `(id)`. The robot itself ("character is SITTING") is not an object its actions name.
+/// `named` and, after them, the objects of `focus` that hold one of them (it is on or inside
+/// them), rooms aside: a choice about an object includes where it is.
+pub(crate) fn with_holders(w: &World, named: Vec<u32>, focus: &[u32]) -> Vec<u32> {
+    let mut out = named.clone();
+    for (from, r, to) in w.edges() {
+        if named.contains(&from)
+            && matches!(r, Relation::Inside | Relation::On)
+            && focus.contains(&to)
+            && !out.contains(&to)
+            && !w.node(to).is_some_and(|n| n.is_room())
+        {
+            out.push(to);
+        }
+    }
+    out
+}
+
 pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
     let words: Vec<String> = text
         .split(|c: char| !(c.is_alphanumeric() || c == '_'))

@@ -61,6 +61,9 @@ pub trait Env {
     fn name(&self) -> &str;
     /// A bounded text view of the state for prompts (at most `budget` bytes).
     fn observe(&self, budget: usize) -> String;
+    /// Lists `ids` first in every later observation (the objects an instruction names, where the
+    /// view is a whole house that the budget cuts).
+    fn view_first(&mut self, ids: &[u32]);
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError>;
     /// The planner's belief of the world (sim: the world itself; dry-run: the initial world advanced
     /// by the planner's own actions; bridge: a shadow world advanced by actions the robot reports
@@ -86,11 +89,13 @@ pub struct SimEnv {
     world: World,
     /// Objects the observation describes (the task's relevant objects, or the whole scene).
     focus: Vec<u32>,
+    /// Of those, the ones listed first ([`Env::view_first`]).
+    first: Vec<u32>,
 }
 
 impl SimEnv {
     pub fn new(world: World, focus: Vec<u32>) -> Self {
-        Self { world, focus }
+        Self { world, focus, first: Vec::new() }
     }
 
     pub fn into_world(self) -> World {
@@ -104,7 +109,11 @@ impl Env for SimEnv {
     }
 
     fn observe(&self, budget: usize) -> String {
-        self.world.observe(&self.focus, budget)
+        self.world.observe_first(&self.focus, &self.first, budget)
+    }
+
+    fn view_first(&mut self, ids: &[u32]) {
+        self.first = ids.to_vec();
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {
@@ -121,11 +130,12 @@ impl Env for SimEnv {
 pub struct DryRunEnv {
     belief: World,
     focus: Vec<u32>,
+    first: Vec<u32>,
 }
 
 impl DryRunEnv {
     pub fn new(world: World, focus: Vec<u32>) -> Self {
-        Self { belief: world, focus }
+        Self { belief: world, focus, first: Vec::new() }
     }
 
     pub fn into_world(self) -> World {
@@ -139,7 +149,11 @@ impl Env for DryRunEnv {
     }
 
     fn observe(&self, budget: usize) -> String {
-        self.belief.observe(&self.focus, budget)
+        self.belief.observe_first(&self.focus, &self.first, budget)
+    }
+
+    fn view_first(&mut self, ids: &[u32]) {
+        self.first = ids.to_vec();
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {

@@ -224,6 +224,75 @@ const PHRASE_ENDS: &[&str] = &[
     "then", "off", "out", "up", "down", "back",
 ];
 
+/// Words that never name an object by themselves, though some class names contain them.
+const NOT_NAMES: &[&str] = &["the", "and", "for", "with", "from", "into", "onto", "then", "all", "both", "off", "out"];
+
+/// The objects of `focus` a free-text instruction names (the robot aside), in `focus` order: a class
+/// name written as words or as one ("washing machine" and "washingmachine" for washing_machine),
+/// its last word in the plural too ("apples", "dishes"); longer names first, so "coffee table" is
+/// the table and not also the coffee. A word no whole name takes then names the objects whose
+/// class begins or ends with it ("clothes" for clothes_pants and clothes_shirt, "machine" for
+/// washing_machine, "table" for kitchentable). `(id)` names its object.
+pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
+    let lower = text.to_lowercase();
+    let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).collect();
+    let parts = |class: &str| -> Vec<String> {
+        class.to_lowercase().split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).map(String::from).collect()
+    };
+    let objects: Vec<(u32, Vec<String>)> = focus
+        .iter()
+        .filter(|&&id| id != w.character())
+        .filter_map(|&id| w.node(id).map(|n| (id, parts(n.class_name))))
+        .filter(|(_, p)| !p.is_empty())
+        .collect();
+    let singular = |x: &str| -> Vec<String> {
+        let mut v = vec![x.to_string()];
+        for suffix in ["es", "s"] {
+            if let Some(s) = x.strip_suffix(suffix).filter(|s| s.len() >= 3) {
+                v.push(s.to_string());
+            }
+        }
+        v
+    };
+    let mut named: Vec<u32> = Vec::new();
+    let mut taken = vec![false; words.len()];
+    let mut i = 0;
+    'words: while i < words.len() {
+        for n in (1..=4.min(words.len() - i)).rev() {
+            let head = words[i..i + n - 1].concat();
+            let forms: Vec<String> = singular(words[i + n - 1]).into_iter().map(|last| format!("{head}{last}")).collect();
+            let hits: Vec<u32> =
+                objects.iter().filter(|(_, p)| forms.contains(&p.concat())).map(|(id, _)| *id).collect();
+            if !hits.is_empty() {
+                named.extend(hits);
+                taken[i..i + n].iter_mut().for_each(|t| *t = true);
+                i += n;
+                continue 'words;
+            }
+        }
+        i += 1;
+    }
+    for (k, x) in words.iter().enumerate() {
+        if taken[k] || x.len() < 3 || NOT_NAMES.contains(x) {
+            continue;
+        }
+        let forms = singular(x);
+        for (id, p) in &objects {
+            let part = p.len() > 1 && (forms.contains(&p[0]) || forms.contains(&p[p.len() - 1]));
+            // A name written as one word ("kitchentable"): its end, of four letters or more.
+            let end = p.len() == 1 && forms.iter().any(|f| f.len() >= 4 && p[0].len() > f.len() && p[0].ends_with(f.as_str()));
+            if part || end {
+                named.push(*id);
+            }
+        }
+    }
+    focus
+        .iter()
+        .copied()
+        .filter(|&id| id != w.character() && (named.contains(&id) || text.contains(&format!("({id})"))))
+        .collect()
+}
+
 /// The noun phrases of `instruction` (the words after an article or a possessive, up to a
 /// preposition, a conjunction or the end) that name no object of the world: no word of the phrase
 /// is part of an object's class name, or begins or ends with one (plural "s"/"es" aside). The
@@ -282,6 +351,39 @@ mod tests {
         assert_eq!(line_verbs("READ or LOOKAT"), [Verb::Read, Verb::LookAt]);
         assert!(line_verbs("fridge is OPEN").is_empty());
         assert!(line_verbs("READ or the fridge").is_empty());
+    }
+
+    #[test]
+    fn an_instruction_names_objects_by_their_class_in_words_whole_names_first() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let names = |t: &str| instruction_objects(&w, &all, t);
+        assert_eq!(names("Put the apples in the fridge."), [10, 12]);
+        // Two words for one name, and the longer name first: not the kitchen, not any other table.
+        assert_eq!(names("put the remote control on the coffee table"), [32, 33]);
+        assert_eq!(names("put the mug on the kitchen table"), [18, 25]);
+        // A word no whole name takes: the names that end with it.
+        assert_eq!(names("wipe the tables"), [18, 33]);
+        assert_eq!(names("hand me (14)"), [14]);
+        assert!(names("do the chores").is_empty());
+        // The robot is never named.
+        assert!(names("the character (3) rests").is_empty());
+    }
+
+    #[test]
+    fn a_word_names_every_kind_its_class_names_begin_with() {
+        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
+        for (id, class) in [(40, "washing_machine"), (41, "clothes_pants"), (42, "clothes_shirt"), (43, "coffee_pot")] {
+            g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
+                {"id": id, "class_name": class, "category": "Props", "properties": [], "states": []}));
+            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": id, "relation_type": "INSIDE", "to_id": 1}));
+        }
+        let w = World::from_json(&g.to_string(), "test").unwrap();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        assert_eq!(instruction_objects(&w, &all, "wash the clothes in the washing machine"), [40, 41, 42]);
+        assert_eq!(instruction_objects(&w, &all, "Wash the pants in the washingmachine"), [40, 41]);
+        // "coffee" alone: the coffee pot and the coffee table, the names beginning with it.
+        assert_eq!(instruction_objects(&w, &all, "make coffee"), [33, 43]);
     }
 
     #[test]

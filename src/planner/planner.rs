@@ -18,7 +18,7 @@ use rand::SeedableRng;
 use serde_json::json;
 use sha2::{Digest, Sha256};
 
-use super::decompose::{named_objects, Proposed};
+use super::decompose::{with_holders, Proposed};
 use super::goals::{self, Goals};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter, StateLog};
@@ -160,6 +160,17 @@ pub(crate) fn run_tree(
         let n = w.nodes().filter(|n| n.id != w.character()).count();
         focus.iter().filter(|&&id| id != w.character()).count() >= n
     });
+    // Over a whole scene, the objects the instruction names (and what holds them) lead the view,
+    // which the budget would otherwise fill with the first objects by id.
+    if focus_is_scene && cfg.subgoal_focus {
+        if let Some(w) = env.world() {
+            let named = goals::instruction_objects(w, &focus, &req.instruction);
+            if !named.is_empty() {
+                let first = with_holders(w, named, &focus);
+                env.view_first(&first);
+            }
+        }
+    }
     let start_state = env.observe(cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
@@ -220,7 +231,7 @@ impl Run<'_> {
         // An instruction that names nothing of a whole scene ("do the chores") would have the
         // model score a line for every state of every object: about a minute of prefill on the
         // demo kitchen, for a choice nothing in the instruction informs. The root proposes steps.
-        if self.focus_is_scene && named_objects(w, &self.focus, &instruction).is_empty() {
+        if self.focus_is_scene && goals::instruction_objects(w, &self.focus, &instruction).is_empty() {
             self.trace.event("goal_candidates", json!({"lines": [], "why": "the instruction names no object of the scene"}));
             return;
         }

@@ -747,6 +747,21 @@ fn the_root_narrows_a_scene_wide_focus_to_what_the_instruction_names_and_keeps_a
     assert!(admits(&m.grammars[0], "WALK", "<sofa> (30)"), "{}", m.grammars[0]);
 }
 
+#[test]
+fn over_a_whole_scene_the_objects_the_instruction_names_lead_the_state() {
+    let w = World::demo();
+    let all: Vec<u32> = w.nodes().map(|n| n.id).filter(|&id| id != w.character()).collect();
+    let mut env = SimEnv::new(w, all.clone());
+    let mut m = Scripted::new(&["done"]);
+    let req = PlanRequest::new("put the remote control on the coffee table", all);
+    let cfg = PlannerConfig { infer_goals: false, ..defaults() };
+    plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    let prompt = &m.prompts[0];
+    let state = prompt.split("State at the start:\n").nth(1).unwrap();
+    let first: Vec<&str> = state.lines().take(2).map(|l| l.split(' ').next().unwrap()).collect();
+    assert_eq!(first, ["<remote_control>", "<coffee_table>"], "{prompt}");
+}
+
 const PUTIN: &str = "[PUTIN] <apple> (12) <fridge> (10)";
 
 #[test]

@@ -34,6 +34,12 @@ impl World {
     /// robot's line is always shown). Cut object lines are counted in a line `… (N more lines not
     /// shown)`.
     pub fn observe(&self, relevant: &[u32], budget: usize) -> String {
+        self.observe_first(relevant, &[], budget)
+    }
+
+    /// [`World::observe`] with the objects of `first` that are in `relevant` listed before the
+    /// others, in the order of `first`, so that a budget cutting a whole house keeps them.
+    pub fn observe_first(&self, relevant: &[u32], first: &[u32], budget: usize) -> String {
         let c = self.char_ix();
         let mut ids: Vec<u32> = relevant.iter().copied().filter(|&id| id != self.character()).collect();
         ids.sort_unstable();
@@ -42,7 +48,8 @@ impl World {
         // The building's own floors, walls and ceilings last, so that the budget cuts them first:
         // a task's relevant objects count a dozen of them, and in id order they used to fill the
         // view before the objects the task is about (the phone of "Pick up phone" was cut).
-        rel_ix.sort_by_key(|&ix| self.view(ix).is_structure());
+        let rank = |ix: Ix| first.iter().position(|&id| id == self.id(ix)).unwrap_or(usize::MAX);
+        rel_ix.sort_by_key(|&ix| (rank(ix), self.view(ix).is_structure()));
 
         let mut lines = Vec::with_capacity(rel_ix.len() + 2);
         let mut robot = String::from("robot: in ");
@@ -333,6 +340,19 @@ mod tests {
         // So a budget cuts the structure first.
         let cut = w.observe(&[4, 5, 10, 12], 220);
         assert!(cut.contains("<apple> (12)") && !cut.contains("<wall>"), "{cut}");
+    }
+
+    #[test]
+    fn objects_asked_for_first_lead_the_view_in_the_order_asked() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let o = w.observe_first(&all, &[33, 32], 10_000);
+        let starts: Vec<&str> = o.lines().take(3).map(|l| l.split(' ').next().unwrap()).collect();
+        assert_eq!(starts, ["<coffee_table>", "<remote_control>", "<kitchen>"], "{o}");
+        // A budget that holds two object lines keeps those two.
+        let cut = w.observe_first(&all, &[33, 32], 250);
+        assert!(cut.contains("(33)") && cut.contains("(32)") && !cut.contains("<fridge>"), "{cut}");
+        assert_eq!(w.observe_first(&all, &[], 500), w.observe(&all, 500));
     }
 
     #[test]
