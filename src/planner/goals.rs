@@ -227,12 +227,25 @@ const PHRASE_ENDS: &[&str] = &[
 /// Words that never name an object by themselves, though some class names contain them.
 const NOT_NAMES: &[&str] = &["the", "and", "for", "with", "from", "into", "onto", "then", "all", "both", "off", "out"];
 
+/// Everyday words for things whose class has another name (VirtualHome's scenes call the same
+/// seat sofa in one house and couch in another), tried when the word itself names nothing.
+const ALIASES: &[(&str, &str)] = &[
+    ("tv", "television"),
+    ("telly", "television"),
+    ("sofa", "couch"),
+    ("couch", "sofa"),
+    ("refrigerator", "fridge"),
+    ("cellphone", "phone"),
+    ("lamp", "light"),
+];
+
 /// The objects of `focus` a free-text instruction names (the robot aside), in `focus` order: a class
 /// name written as words or as one ("washing machine" and "washingmachine" for washing_machine),
 /// its last word in the plural too ("apples", "dishes"); longer names first, so "coffee table" is
 /// the table and not also the coffee. A word no whole name takes then names the objects whose
 /// class begins or ends with it ("clothes" for clothes_pants and clothes_shirt, "machine" for
-/// washing_machine, "table" for kitchentable). `(id)` names its object.
+/// washing_machine, "table" for kitchentable), or, failing that, a few everyday words name a
+/// class of another name ("tv" for television, [`ALIASES`]). `(id)` names its object.
 pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
     let lower = text.to_lowercase();
     let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).collect();
@@ -273,18 +286,28 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
         i += 1;
     }
     for (k, x) in words.iter().enumerate() {
-        if taken[k] || x.len() < 3 || NOT_NAMES.contains(x) {
+        if taken[k] || NOT_NAMES.contains(x) {
             continue;
         }
         let forms = singular(x);
-        for (id, p) in &objects {
-            let part = p.len() > 1 && (forms.contains(&p[0]) || forms.contains(&p[p.len() - 1]));
-            // A name written as one word ("kitchentable"): its end, of four letters or more.
-            let end = p.len() == 1 && forms.iter().any(|f| f.len() >= 4 && p[0].len() > f.len() && p[0].ends_with(f.as_str()));
-            if part || end {
-                named.push(*id);
-            }
+        let by_part: Vec<u32> = objects
+            .iter()
+            .filter(|(_, p)| {
+                let part = p.len() > 1 && (forms.contains(&p[0]) || forms.contains(&p[p.len() - 1]));
+                // A name written as one word ("kitchentable"): its end, of four letters or more.
+                let end = p.len() == 1
+                    && forms.iter().any(|f| f.len() >= 4 && p[0].len() > f.len() && p[0].ends_with(f.as_str()));
+                x.len() >= 3 && (part || end)
+            })
+            .map(|(id, _)| *id)
+            .collect();
+        if !by_part.is_empty() {
+            named.extend(by_part);
+            continue;
         }
+        let aliases: Vec<&str> =
+            ALIASES.iter().filter(|(word, _)| forms.iter().any(|f| f == word)).map(|&(_, class)| class).collect();
+        named.extend(objects.iter().filter(|(_, p)| aliases.contains(&p.concat().as_str())).map(|(id, _)| *id));
     }
     focus
         .iter()
@@ -313,6 +336,7 @@ pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
             .filter(|s| s.len() >= 3)
             .collect::<Vec<_>>();
         stem.iter().any(|s| classes.iter().any(|c| c.contains(s) || s.starts_with(c.as_str()) || s.ends_with(c.as_str())))
+            || ALIASES.iter().any(|(alias, class)| word == *alias && classes.contains(*class))
     };
     let lower = instruction.to_lowercase();
     let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
@@ -366,6 +390,9 @@ mod tests {
         assert_eq!(names("wipe the tables"), [18, 33]);
         assert_eq!(names("hand me (14)"), [14]);
         assert!(names("do the chores").is_empty());
+        // Everyday words for a class of another name.
+        assert_eq!(names("sit on the couch and turn on the TV"), [30, 31]);
+        assert_eq!(names("turn on the lamp"), [23, 35]);
         // The robot is never named.
         assert!(names("the character (3) rests").is_empty());
     }
@@ -390,6 +417,8 @@ mod tests {
     fn phrases_that_name_no_object_of_the_scene_are_found() {
         let w = World::demo();
         assert_eq!(unknown_objects(&w, "put the unicorn in the fridge"), vec!["unicorn"]);
+        // The demo's seat is a sofa; "couch" names it too.
+        assert!(unknown_objects(&w, "sit on the couch").is_empty());
         assert_eq!(unknown_objects(&w, "Put the red apples into my fridge."), Vec::<String>::new());
         assert_eq!(unknown_objects(&w, "give the dragon and a golden harp to the apple"), vec!["dragon", "golden harp"]);
         // No article, nothing looked at; an article with nothing after it, nothing either.
