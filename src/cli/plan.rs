@@ -229,7 +229,11 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             "status" => {
                 let st = v["status"].as_str().unwrap_or("");
                 if matches!(st, "abandoned")
-                    || (st == "executed" && v["why"].as_str() == Some("all its steps are done"))
+                    || (st == "executed"
+                        && matches!(
+                            v["why"].as_str(),
+                            Some("all its steps are done" | "it already held: nothing to do" | "complete without a step")
+                        ))
                 {
                     eprintln!("{}    [{st}: {}]", indent(node, &depth_of), v["why"].as_str().unwrap_or(""));
                 }

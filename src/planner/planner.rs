@@ -579,7 +579,15 @@ impl Run<'_> {
                     self.set_status(child, Status::Decomposing, "not one action");
                     match self.expand(child, target_child.clone())? {
                         End::Complete => {
-                            self.set_status(child, Status::Executed, "all its steps are done");
+                            let stepless = !self.tree.node(child).children.iter().any(|&c| self.tree.node(c).status == Status::Executed);
+                            let held =
+                                self.line_fact(&child_text).is_some_and(|f| self.env.world().is_some_and(|w| w.holds(f)));
+                            let why = match (stepless, held) {
+                                (true, true) => "it already held: nothing to do",
+                                (true, false) => "complete without a step",
+                                _ => "all its steps are done",
+                            };
+                            self.set_status(child, Status::Executed, why);
                             st.accepted += 1;
                             // A target's own action ran last: what it changed is said here too.
                             st.previous = Some(match (&target_child, self.change_report()) {

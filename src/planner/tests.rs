@@ -1229,6 +1229,19 @@ fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
 }
 
 #[test]
+fn a_goal_line_that_already_holds_says_so_in_its_status() {
+    // The demo's fridge is closed at the start.
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: fridge is CLOSED".to_string(), "done".to_string()].into();
+    let cfg = PlannerConfig { infer_goals: true, ..defaults() };
+    let req = PlanRequest::new("close the fridge", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert!(out.executed.is_empty() && out.tree.node(1).text == "fridge is CLOSED", "{:?}", out.tree.to_json());
+    let (status, why) = out.tree.node(1).history.last().unwrap();
+    assert_eq!((status.as_str(), why.as_str()), ("executed", "it already held: nothing to do"));
+}
+
+#[test]
 fn an_instruction_that_names_no_object_of_the_scene_sets_no_goals_over_all_of_it() {
     // Every state of every object of the kitchen would be a line to score: the root proposes
     // steps instead, as without the flag.
