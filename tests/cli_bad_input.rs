@@ -292,9 +292,14 @@ fn an_instruction_naming_an_object_the_scene_lacks_is_warned_about_and_reported(
     assert!(err.contains("fridge") && err.contains("--scene FILE"), "{err}");
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(v["unknown_objects"], serde_json::json!(["unicorn"]));
-    // The demo's own objects raise nothing.
+    // The demo's own objects raise nothing, and the tree says what the instruction was read to name.
     let o = plan("put the apple in the fridge");
     assert!(!stderr(&o).contains("no object of the scene"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("[the instruction names <fridge> (10), <apple> (12); on or in: <kitchencounter> (11)]"),
+        "{}",
+        stderr(&o)
+    );
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(v["unknown_objects"], serde_json::json!([]));
 }

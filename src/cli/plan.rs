@@ -203,6 +203,22 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             "verdict" => {
                 eprintln!("{}    -> {}", indent(node, &depth_of), v["verdict"].as_str().unwrap_or(""));
             }
+            "instruction_objects" => {
+                let list = |key: &str| {
+                    let all: Vec<&str> = v[key].as_array().into_iter().flatten().filter_map(Value::as_str).collect();
+                    let more = all.len().saturating_sub(12);
+                    let more = if more > 0 { format!(" and {more} more") } else { String::new() };
+                    format!("{}{more}", all[..all.len().min(12)].join(", "))
+                };
+                let holding = list("holding_them");
+                let holding = if holding.is_empty() { String::new() } else { format!("; on or in: {holding}") };
+                eprintln!("  [the instruction names {}{holding}]", list("named"));
+            }
+            "goal_candidates" => {
+                if let Some(why) = v["why"].as_str() {
+                    eprintln!("  [no goal lines: {why}]");
+                }
+            }
             "warm" => match (v["error"].as_str(), serde_json::from_value::<Warm>(v.clone())) {
                 (Some(e), _) => eprintln!("  [system message not prepared ahead: {e}]"),
                 (None, Ok(w)) if w.source != WarmSource::Cached => {

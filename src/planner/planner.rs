@@ -162,11 +162,14 @@ pub(crate) fn run_tree(
     });
     // Over a whole scene, the objects the instruction names (and what holds them) lead the view,
     // which the budget would otherwise fill with the first objects by id.
+    let mut view_first = None;
     if focus_is_scene && cfg.subgoal_focus {
         if let Some(w) = env.world() {
             let named = goals::instruction_objects(w, &focus, &req.instruction);
             if !named.is_empty() {
-                let first = with_holders(w, named, &focus);
+                let first = with_holders(w, named.clone(), &focus);
+                let labels = |ids: &[u32]| -> Vec<String> { ids.iter().filter_map(|&id| w.node(id).map(|n| n.label())).collect() };
+                view_first = Some(json!({"named": labels(&named), "holding_them": labels(&first[named.len()..])}));
                 env.view_first(&first);
             }
         }
@@ -192,6 +195,10 @@ pub(crate) fn run_tree(
         goals: Goals::shown(req),
     };
     run.node_event(0);
+    if let Some(objects) = view_first {
+        // What the planner took the instruction to be about: a user can see a misreading at once.
+        run.trace.event("instruction_objects", objects);
+    }
     let root = run.tree.root();
     run.infer_goals();
     run.warm();
