@@ -281,7 +281,7 @@ pub fn flat(
         Ok(l) => l,
         Err(e) => return finish(tree, vec![], StopCause::Error(format!("plan grammar: {e}")), stats, t0, trace),
     };
-    let prompt = flat_prompt(req, &env.observe(cfg.observe_budget));
+    let prompt = flat_prompt(req, &env.observe(&[], cfg.observe_budget));
     let opts = GenOptions { max_tokens: cfg.gen.max_tokens.max(max_lines * TOKENS_PER_LINE), ..cfg.gen.clone() };
     let prompt_hash = super::planner::prompt_hash(&prompt, &lark);
     let call_t0 = Instant::now();

@@ -66,8 +66,6 @@ pub struct BridgeEnv {
     timeout: Duration,
     shadow: World,
     focus: Vec<u32>,
-    /// Of those, the ones listed first ([`Env::view_first`]).
-    first: Vec<u32>,
     transcript: Vec<Exchange>,
     /// Set once the bridge has failed: the error every later action gets.
     dead: Option<String>,
@@ -148,7 +146,6 @@ impl BridgeEnv {
             timeout,
             shadow: scene,
             focus,
-            first: Vec::new(),
             transcript: Vec::new(),
             dead: None,
         })
@@ -230,12 +227,8 @@ impl Env for BridgeEnv {
         &self.name
     }
 
-    fn observe(&self, budget: usize) -> String {
-        self.shadow.observe_first(&self.focus, &self.first, budget)
-    }
-
-    fn view_first(&mut self, ids: &[u32]) {
-        self.first = ids.to_vec();
+    fn observe(&self, first: &[u32], budget: usize) -> String {
+        self.shadow.observe_first(&self.focus, first, budget)
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {

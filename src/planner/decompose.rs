@@ -256,18 +256,16 @@ impl Run<'_> {
         if !self.cfg.subgoal_focus || (node == self.tree.root() && !self.focus_is_scene) {
             return Ok(self.focus.clone());
         }
+        // The root's text is the user's own words, read once at the start (`Run::root_view`).
+        if node == self.tree.root() {
+            return Ok(if self.root_view.is_empty() { self.focus.clone() } else { self.root_view.clone() });
+        }
         let w = self.world()?;
-        let text = &self.tree.node(node).text;
-        // The root's text is the user's own words; the others are written from the world's names.
-        let named = if node == self.tree.root() {
-            goals::instruction_objects(w, &self.focus, text)
-        } else {
-            named_objects(w, &self.focus, text)
-        };
+        let named = named_objects(w, &self.focus, &self.tree.node(node).text);
         if named.is_empty() {
             return Ok(self.focus.clone());
         }
-        Ok(with_holders(w, named, &self.focus))
+        Ok(with_holders(w, &named, &self.focus))
     }
 
     /// The target subgoals a decision at `node` may write: the actions of the
@@ -512,12 +510,10 @@ fn outcome(w: &World, a: &Action, targets: &[Action]) -> Option<World> {
     }
 }
 
-/// The objects of `focus` that `text` names: by class name (a whole word, case-insensitive) or by id
-/// written as `(id)`. The robot itself ("character is SITTING") is not an object its actions name.
 /// `named` and, after them, the objects of `focus` that hold one of them (it is on or inside
 /// them), rooms aside: a choice about an object includes where it is.
-pub(crate) fn with_holders(w: &World, named: Vec<u32>, focus: &[u32]) -> Vec<u32> {
-    let mut out = named.clone();
+pub(crate) fn with_holders(w: &World, named: &[u32], focus: &[u32]) -> Vec<u32> {
+    let mut out = named.to_vec();
     for (from, r, to) in w.edges() {
         if named.contains(&from)
             && matches!(r, Relation::Inside | Relation::On)
@@ -531,6 +527,8 @@ pub(crate) fn with_holders(w: &World, named: Vec<u32>, focus: &[u32]) -> Vec<u32
     out
 }
 
+/// The objects of `focus` that `text` names: by class name (a whole word, case-insensitive) or by id
+/// written as `(id)`. The robot itself ("character is SITTING") is not an object its actions name.
 pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
     let words: Vec<String> = text
         .split(|c: char| !(c.is_alphanumeric() || c == '_'))

@@ -59,11 +59,10 @@ pub enum EnvError {
 pub trait Env {
     /// `sim`, `dry-run`, `bridge:CMD`.
     fn name(&self) -> &str;
-    /// A bounded text view of the state for prompts (at most `budget` bytes).
-    fn observe(&self, budget: usize) -> String;
-    /// Lists `ids` first in every later observation (the objects an instruction names, where the
-    /// view is a whole house that the budget cuts).
-    fn view_first(&mut self, ids: &[u32]);
+    /// A bounded text view of the state for prompts (at most `budget` bytes), the objects of
+    /// `first` listed before the others (the objects an instruction names, where the view is a
+    /// whole house that the budget cuts).
+    fn observe(&self, first: &[u32], budget: usize) -> String;
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError>;
     /// The planner's belief of the world (sim: the world itself; dry-run: the initial world advanced
     /// by the planner's own actions; bridge: a shadow world advanced by actions the robot reports
@@ -89,13 +88,11 @@ pub struct SimEnv {
     world: World,
     /// Objects the observation describes (the task's relevant objects, or the whole scene).
     focus: Vec<u32>,
-    /// Of those, the ones listed first ([`Env::view_first`]).
-    first: Vec<u32>,
 }
 
 impl SimEnv {
     pub fn new(world: World, focus: Vec<u32>) -> Self {
-        Self { world, focus, first: Vec::new() }
+        Self { world, focus }
     }
 
     pub fn into_world(self) -> World {
@@ -108,12 +105,8 @@ impl Env for SimEnv {
         "sim"
     }
 
-    fn observe(&self, budget: usize) -> String {
-        self.world.observe_first(&self.focus, &self.first, budget)
-    }
-
-    fn view_first(&mut self, ids: &[u32]) {
-        self.first = ids.to_vec();
+    fn observe(&self, first: &[u32], budget: usize) -> String {
+        self.world.observe_first(&self.focus, first, budget)
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {
@@ -130,12 +123,11 @@ impl Env for SimEnv {
 pub struct DryRunEnv {
     belief: World,
     focus: Vec<u32>,
-    first: Vec<u32>,
 }
 
 impl DryRunEnv {
     pub fn new(world: World, focus: Vec<u32>) -> Self {
-        Self { belief: world, focus, first: Vec::new() }
+        Self { belief: world, focus }
     }
 
     pub fn into_world(self) -> World {
@@ -148,12 +140,8 @@ impl Env for DryRunEnv {
         "dry-run"
     }
 
-    fn observe(&self, budget: usize) -> String {
-        self.belief.observe_first(&self.focus, &self.first, budget)
-    }
-
-    fn view_first(&mut self, ids: &[u32]) {
-        self.first = ids.to_vec();
+    fn observe(&self, first: &[u32], budget: usize) -> String {
+        self.belief.observe_first(&self.focus, first, budget)
     }
 
     fn execute(&mut self, action: &Action) -> Result<Outcome, EnvError> {

@@ -239,6 +239,14 @@ const ALIASES: &[(&str, &str)] = &[
     ("lamp", "light"),
 ];
 
+/// A word and, where three letters or more are left, the word without a plural's "es" or "s"
+/// ("dishes": dish, dishe; "apples": apple): the forms a class name may take in it.
+fn word_forms(word: &str) -> Vec<&str> {
+    let mut forms = vec![word];
+    forms.extend(["es", "s"].iter().filter_map(|suffix| word.strip_suffix(suffix)).filter(|s| s.len() >= 3));
+    forms
+}
+
 /// The objects of `focus` a free-text instruction names (the robot aside), in `focus` order: a class
 /// name written as words or as one ("washing machine" and "washingmachine" for washing_machine),
 /// its last word in the plural too ("apples", "dishes"); longer names first, so "coffee table" is
@@ -258,15 +266,7 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
         .filter_map(|&id| w.node(id).map(|n| (id, parts(n.class_name))))
         .filter(|(_, p)| !p.is_empty())
         .collect();
-    let singular = |x: &str| -> Vec<String> {
-        let mut v = vec![x.to_string()];
-        for suffix in ["es", "s"] {
-            if let Some(s) = x.strip_suffix(suffix).filter(|s| s.len() >= 3) {
-                v.push(s.to_string());
-            }
-        }
-        v
-    };
+    let singular = |x: &str| -> Vec<String> { word_forms(x).into_iter().map(String::from).collect() };
     let mut named: Vec<u32> = Vec::new();
     let mut taken = vec![false; words.len()];
     let mut i = 0;
@@ -330,11 +330,7 @@ pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
         .map(|n| n.class_name.to_lowercase().replace(['_', ' '], ""))
         .collect();
     let names = |word: &str| {
-        let stem = [word.strip_suffix("es"), word.strip_suffix('s'), Some(word)]
-            .into_iter()
-            .flatten()
-            .filter(|s| s.len() >= 3)
-            .collect::<Vec<_>>();
+        let stem = word_forms(word);
         stem.iter().any(|s| classes.iter().any(|c| c.contains(s) || s.starts_with(c.as_str()) || s.ends_with(c.as_str())))
             || ALIASES.iter().any(|(alias, class)| word == *alias && classes.contains(*class))
     };

@@ -733,7 +733,7 @@ pub fn plan(
                     "subgoals": req.subgoals, "kept": req.kept, "named_verbs": req.named_verbs,
                     "oracle": req.oracle.is_some() && cfg.oracle_stop},
         "env": env.name(),
-        "observation": env.observe(cfg.observe_budget),
+        "observation": env.observe(&[], cfg.observe_budget),
     });
     trace.event("header", header);
     let out = match cfg.kind {

@@ -141,6 +141,11 @@ pub(crate) struct Run<'a> {
     pub(super) goals: Goals,
     /// The state at the start (in the task part of every prompt) and what changed since.
     pub(super) states: StateLog,
+    /// Over a whole scene, the objects the instruction names ([`goals::instruction_objects`]).
+    pub(super) root_objects: Vec<u32>,
+    /// Those and what holds them, with `subgoal_focus`: the root's focus, listed first in every
+    /// observation (empty: the whole focus, in id order).
+    pub(super) root_view: Vec<u32>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -162,21 +167,20 @@ pub(crate) fn run_tree(
     });
     // Over a whole scene, the objects the instruction names (and what holds them) lead the view,
     // which the budget would otherwise fill with the first objects by id.
-    let mut view_first = None;
-    if focus_is_scene && cfg.subgoal_focus {
-        if let Some(w) = env.world() {
-            let named = goals::instruction_objects(w, &focus, &req.instruction);
-            if !named.is_empty() {
-                let first = with_holders(w, named.clone(), &focus);
-                let labels = |ids: &[u32]| -> Vec<String> { ids.iter().filter_map(|&id| w.node(id).map(|n| n.label())).collect() };
-                view_first = Some(json!({"named": labels(&named), "holding_them": labels(&first[named.len()..])}));
-                env.view_first(&first);
-            }
+    let (mut root_objects, mut root_view, mut read_as) = (Vec::new(), Vec::new(), None);
+    if let Some(w) = env.world().filter(|_| focus_is_scene) {
+        root_objects = goals::instruction_objects(w, &focus, &req.instruction);
+        if cfg.subgoal_focus && !root_objects.is_empty() {
+            root_view = with_holders(w, &root_objects, &focus);
+            let labels = |ids: &[u32]| -> Vec<String> { ids.iter().filter_map(|&id| w.node(id).map(|n| n.label())).collect() };
+            read_as = Some(json!({"named": labels(&root_objects), "holding_them": labels(&root_view[root_objects.len()..])}));
         }
     }
-    let start_state = env.observe(cfg.observe_budget);
+    let start_state = env.observe(&root_view, cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
+        root_objects,
+        root_view,
         focus_is_scene,
         last_change: Vec::new(),
         model,
@@ -195,7 +199,7 @@ pub(crate) fn run_tree(
         goals: Goals::shown(req),
     };
     run.node_event(0);
-    if let Some(objects) = view_first {
+    if let Some(objects) = read_as {
         // What the planner took the instruction to be about: a user can see a misreading at once.
         run.trace.event("instruction_objects", objects);
     }
@@ -238,7 +242,7 @@ impl Run<'_> {
         // An instruction that names nothing of a whole scene ("do the chores") would have the
         // model score a line for every state of every object: about a minute of prefill on the
         // demo kitchen, for a choice nothing in the instruction informs. The root proposes steps.
-        if self.focus_is_scene && goals::instruction_objects(w, &self.focus, &instruction).is_empty() {
+        if self.focus_is_scene && self.root_objects.is_empty() {
             self.trace.event("goal_candidates", json!({"lines": [], "why": "the instruction names no object of the scene"}));
             return;
         }
@@ -348,7 +352,8 @@ impl Run<'_> {
     pub(super) fn view(&mut self, node: NodeId, previous: Option<&str>, rejected: Option<&str>) -> NodeView {
         // The view as bounded at the start: the objects it leaves out (the building's floors and
         // walls first) are left out of the changes too, as they were of the whole state.
-        let observation = self.states.since(&self.env.observe(self.cfg.observe_budget), self.cfg.observe_budget);
+        let observation =
+            self.states.since(&self.env.observe(&self.root_view, self.cfg.observe_budget), self.cfg.observe_budget);
         let history = || Some(self.executed.iter().map(|a| a.to_string()).collect());
         match self.mode {
             ContextMode::Step => NodeView {
@@ -587,6 +592,7 @@ impl Run<'_> {
                     match self.expand(child, target_child.clone())? {
                         End::Complete => {
                             let stepless = !self.tree.node(child).children.iter().any(|&c| self.tree.node(c).status == Status::Executed);
+                            // (Nothing below changes the world: the same answer serves the met lines.)
                             let held =
                                 self.line_fact(&child_text).is_some_and(|f| self.env.world().is_some_and(|w| w.holds(f)));
                             let why = match (stepless, held) {
@@ -604,7 +610,7 @@ impl Run<'_> {
                             if target_child.is_some() {
                                 self.establish(&mut st);
                             }
-                            if is_root && self.line_fact(&child_text).is_some_and(|f| self.env.world().is_some_and(|w| w.holds(f))) {
+                            if is_root && held {
                                 st.met_lines.push(child_text.clone());
                             }
                             st.rejected = None;
