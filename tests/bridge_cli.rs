@@ -1,5 +1,5 @@
 //! The robot bridge through `step plan --env "bridge:CMD"`: scripted child processes stand in for a
-//! robot that answers, crashes, speaks garbage or stays silent. Each bad robot is a clear error that
+//! robot that answers (with fields of its own), crashes, speaks garbage or stays silent. Each bad robot is a clear error that
 //! names what was sent and what came back, and the trace keeps every event up to it. A tiny
 //! random-weight model does the planning (the bridge's wiring is under test, not the plan).
 
@@ -55,11 +55,16 @@ fn kinds<'a>(events: &'a [serde_json::Value], kind: &str) -> Vec<&'a serde_json:
 fn a_robot_that_answers_ok_executes_the_plan_and_sees_each_action_as_json() {
     let dir = tempfile::tempdir().unwrap();
     let model = tiny_model(dir.path());
-    // The robot logs what it was sent, then answers ok.
+    // The robot logs what it was sent, then answers ok with a field of its own (a timing).
     let log = dir.path().join("robot.log");
-    let robot = format!("while read l; do echo \"$l\" >> {}; echo '{{\"status\": \"ok\"}}'; done", log.display());
+    let robot = format!(
+        "while read l; do echo \"$l\" >> {}; echo '{{\"status\": \"ok\", \"duration_ms\": 3}}'; done",
+        log.display()
+    );
     let (o, events) = plan_with(&dir.path().join("ok.jsonl"), &model, &robot, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // The robot's own field is named once, not an error.
+    assert_eq!(stderr(&o).matches("\"duration_ms\"; it is ignored").count(), 1, "{}", stderr(&o));
     let execs = kinds(&events, "exec");
     assert!(!execs.is_empty(), "no action executed: {events:?}");
     let sent: Vec<serde_json::Value> =

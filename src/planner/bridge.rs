@@ -8,6 +8,9 @@
 //!   `{"status": "failed", "reason": "...", "kind": "..."}` (kind optional), or
 //!   `{"status": "skipped", "reason": "..."}` (the effect already held).
 //!
+//! Fields other than these are ignored, with a warning the first time each is seen, so a robot can add
+//! its own (timings, poses) without breaking the run.
+//!
 //! Each answer must come within the timeout. A child that exits or closes its stdout (crashed), stays
 //! silent (timeout) or answers something that is not an outcome (garbage) is an [`EnvError`] naming what
 //! was sent and what came back; the bridge is then dead (every later action gets the same error), the
@@ -42,9 +45,8 @@ pub struct Exchange {
     pub error: Option<String>,
 }
 
-/// An answer line as the child writes it.
+/// An answer line as the child writes it; `extra` holds the fields the protocol does not define.
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
 struct RawOutcome {
     status: String,
     #[serde(default)]
@@ -53,6 +55,8 @@ struct RawOutcome {
     reason: Option<String>,
     #[serde(default)]
     kind: Option<String>,
+    #[serde(flatten)]
+    extra: std::collections::BTreeMap<String, serde_json::Value>,
 }
 
 /// A child process executing actions (see the module documentation).
@@ -69,6 +73,8 @@ pub struct BridgeEnv {
     transcript: Vec<Exchange>,
     /// Set once the bridge has failed: the error every later action gets.
     dead: Option<String>,
+    /// Answer fields outside the protocol already warned about (once each).
+    warned: std::collections::BTreeSet<String>,
 }
 
 impl BridgeEnv {
@@ -148,6 +154,7 @@ impl BridgeEnv {
             focus,
             transcript: Vec::new(),
             dead: None,
+            warned: Default::default(),
         })
     }
 
@@ -166,12 +173,14 @@ impl BridgeEnv {
         json!({"action": action.verb.name(), "args": args, "line": action.to_string()}).to_string()
     }
 
-    /// Reads one answer line into an outcome; `Err(detail)` when it is not one.
-    fn read_outcome(line: &str) -> Result<Outcome, String> {
+    /// Reads one answer line into an outcome and the names of the fields outside the protocol;
+    /// `Err(detail)` when it is not an outcome.
+    fn read_outcome(line: &str) -> Result<(Outcome, Vec<String>), String> {
         let raw: RawOutcome = serde_json::from_str(line.trim()).map_err(|e| {
             format!("{e} (expected {{\"status\": \"ok\"|\"failed\"|\"skipped\", \"observation\"|\"reason\": \"...\"}})")
         })?;
-        match raw.status.as_str() {
+        let extra = raw.extra.keys().cloned().collect();
+        let outcome = match raw.status.as_str() {
             "ok" => Ok(Outcome::Ok { observation: raw.observation.filter(|o| !o.trim().is_empty()) }),
             "failed" => match raw.reason {
                 Some(reason) if !reason.trim().is_empty() => Ok(Outcome::Failed { reason, kind: raw.kind }),
@@ -181,7 +190,8 @@ impl BridgeEnv {
                 Ok(Outcome::Skipped { reason: raw.reason.unwrap_or_else(|| "its effect already held".into()) })
             }
             s => Err(format!("unknown status {s:?} (expected \"ok\", \"failed\" or \"skipped\")")),
-        }
+        }?;
+        Ok((outcome, extra))
     }
 
     fn stderr_tail(&self) -> String {
@@ -261,7 +271,15 @@ impl Env for BridgeEnv {
         };
         let received = line.trim_end_matches(['\n', '\r']).to_string();
         match Self::read_outcome(&received) {
-            Ok(outcome) => {
+            Ok((outcome, extra)) => {
+                for field in extra {
+                    if self.warned.insert(field.clone()) {
+                        eprintln!(
+                            "warning: the robot answered {sent} with a field the bridge protocol does not define, \
+                             {field:?}; it is ignored (read are \"status\", \"observation\", \"reason\", \"kind\")"
+                        );
+                    }
+                }
                 if matches!(outcome, Outcome::Ok { .. }) {
                     // The shadow follows the robot; an action the shadow cannot run leaves it as it was
                     // (the robot is the authority on what happened).
@@ -434,9 +452,15 @@ for line in sys.stdin:
         // A well-formed line with a bad status or no reason is garbage too.
         assert!(BridgeEnv::read_outcome(r#"{"status": "done"}"#).unwrap_err().contains("unknown status"));
         assert!(BridgeEnv::read_outcome(r#"{"status": "failed"}"#).unwrap_err().contains("reason"));
+        assert!(BridgeEnv::read_outcome(r#"["ok"]"#).unwrap_err().contains("expected"));
         assert_eq!(
             BridgeEnv::read_outcome(r#"{"status": "skipped", "reason": "already open"}"#).unwrap(),
-            Outcome::Skipped { reason: "already open".into() }
+            (Outcome::Skipped { reason: "already open".into() }, vec![])
+        );
+        // A robot's own fields (telemetry) are named, not an error; the outcome is read as without them.
+        assert_eq!(
+            BridgeEnv::read_outcome(r#"{"status": "ok", "duration_ms": 3, "pose": [1, 2]}"#).unwrap(),
+            (Outcome::Ok { observation: None }, vec!["duration_ms".to_string(), "pose".to_string()])
         );
     }
 
