@@ -111,3 +111,24 @@ fn a_task_file_can_use_an_eai_scene_with_its_own_goal() {
     // Relevant objects by the goal rule: the washing machine, the robot, and their rooms.
     assert!(mine[0].relevant.contains(&1001) && mine[0].relevant.contains(&mine[0].world.character()));
 }
+
+/// The held-out task files (`tests/data/heldout`: tasks of EAI's kinds on EAI's scenes, with
+/// objects and goals drawn by its `make_tasks.py`, seeds 0 and 1) load with EAI's rule for the
+/// relevant objects, and every gold program meets its task's goals.
+#[test]
+fn the_held_out_tasks_load_and_their_gold_programs_meet_their_goals() {
+    if tasks().is_none() {
+        return;
+    }
+    let data = EaiData::open(None).unwrap().root;
+    for (file, n) in [("dev.json", 66), ("test.json", 66)] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/heldout").join(file);
+        let tasks = TaskSource { tasks_file: Some(path), data: Some(data.clone()) }.load(None).unwrap();
+        assert_eq!(tasks.len(), n, "{file}");
+        for t in &tasks {
+            let r = score(t, &PlanInput::Plan(gold(t).clone()));
+            assert!(r.executed && r.success, "{file} {}: {r:?}", t.id);
+            assert_eq!(t.relevance.rule, step::eval::RelevantRule::GoldRun, "{file} {}", t.id);
+        }
+    }
+}

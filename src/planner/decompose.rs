@@ -296,6 +296,14 @@ impl Run<'_> {
                 .collect();
             candidates.extend(others);
         }
+        // Below a goal line whose fact holds, no target whose way undoes it: the way may undo a
+        // line that a later line can take again, but not the one being worked on, which is met
+        // (a robot sitting on the chair it was to sit on stood up on the way to carrying that chair).
+        let own_met: Vec<Fact> = if self.keeps_goals() && self.under_offered(node) {
+            self.line_fact(&self.tree.node(node).text).filter(|f| w.holds(f)).cloned().into_iter().collect()
+        } else {
+            Vec::new()
+        };
         // Only targets the world knows a way to: not an affordance error, not already so.
         let menu = candidates
             .into_iter()
@@ -320,6 +328,8 @@ impl Run<'_> {
                     // relation of the very object the target places: the coffee that is to stay ON
                     // the coffee maker, grabbed on the way to a PUTIN into it)
                     && !(self.keeps_goals() && makes_false(w, &after, &relations_of(&self.goals.kept, a)))
+                    // (nor the line it is taken under, while that line holds: `own_met`)
+                    && !makes_false(w, &after, &own_met)
                     // (nor may it take a hand a hold line reserves, way included)
                     && !(self.keeps_goals() && takes_a_reserved_hand(w, &after, &self.goals.kept))
                     && !(self.skips_idle(a.verb) && changes_nothing(&before, &after, a))
