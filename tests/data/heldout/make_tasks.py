@@ -124,19 +124,19 @@ def kinds(g, ch):
         return (f"Run {words(h)} with {words(x)}", f"I put the {words(x)} in the {words(h)}, close it and turn it on.",
                 goal, [], steps)
 
+    def rest_on(seat, state, verb, title, desc):
+        return (title, desc,
+                [{"id": c, "class_name": "character", "state": state},
+                 {"from_id": c, "relation_type": "ON", "to_id": seat["id"]}], [],
+                [f"[WALK] {ref(seat)}", f"[{verb}] {ref(seat)}"])
+
     def sit_task():
         s = rng.choice(seats)
-        return (f"Sit on {words(s)}", f"I go to the {words(s)} and sit down.",
-                [{"id": c, "class_name": "character", "state": "SITTING"},
-                 {"from_id": c, "relation_type": "ON", "to_id": s["id"]}], [],
-                [f"[WALK] {ref(s)}", f"[SIT] {ref(s)}"])
+        return rest_on(s, "SITTING", "SIT", f"Sit on {words(s)}", f"I go to the {words(s)} and sit down.")
 
     def lie_task():
         b = rng.choice(beds)
-        return (f"Lie down on {words(b)}", f"I am tired, so I lie down on the {words(b)}.",
-                [{"id": c, "class_name": "character", "state": "LYING"},
-                 {"from_id": c, "relation_type": "ON", "to_id": b["id"]}], [],
-                [f"[WALK] {ref(b)}", f"[LIE] {ref(b)}"])
+        return rest_on(b, "LYING", "LIE", f"Lie down on {words(b)}", f"I am tired, so I lie down on the {words(b)}.")
 
     def hold_task():
         x = rng.choice(carried)
