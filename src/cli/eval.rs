@@ -92,9 +92,9 @@ pub struct PlanArgs {
     pub no_symbolic_check: bool,
     #[command(flatten)]
     pub rules: super::args::DecisionArgs,
-    /// On EAI's tasks, also offer the actions EAI's own scorer cannot score (SLEEP, WAKEUP,
-    /// LOOKAT_SHORT, LOOKAT_LONG, RELEASE); they are left out by default so `--export-eai` plans can be
-    /// scored.
+    /// Also offer the actions EAI's own scorer cannot score (SLEEP, WAKEUP, LOOKAT_SHORT,
+    /// LOOKAT_LONG, RELEASE); they are left out by default, on EAI's tasks and a task file alike, so
+    /// `--export-eai` plans can be scored.
     #[arg(long)]
     pub all_verbs: bool,
     /// Write one JSON-lines trace per task here (<id>.jsonl).
@@ -183,7 +183,8 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
             random_actions: a.random_actions,
             random_steps: a.random_steps,
             random_lines: a.random_lines,
-            excluded_verbs: if source.tasks_file.is_none() && !a.all_verbs {
+            // (a task file too: its plans are scored EAI's way, and exported for EAI's scorer)
+            excluded_verbs: if !a.all_verbs {
                 crate::eval::plans::EAI_UNSCOREABLE.to_vec()
             } else {
                 Vec::new()
