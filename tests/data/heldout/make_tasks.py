@@ -9,6 +9,11 @@ unpacked from the benchmark's init_and_final_graphs.tar.xz). dev.json is seed 0,
 came of them, README "Held-out tasks"); test.json's were not before its figures were taken."""
 import json, os, random, subprocess, sys, tempfile
 
+if len(sys.argv) != 5 or not sys.argv[3].isdigit() or not os.path.isdir(sys.argv[1]) \
+        or not os.access(sys.argv[4], os.X_OK):
+    sys.exit("usage: python3 make_tasks.py GRAPH_DIR OUT.json SEED STEP_BINARY\n"
+             "  GRAPH_DIR: a directory of EAI's file<id>.json (init_and_final_graphs.tar.xz unpacked)\n"
+             "  SEED: a whole number (dev.json is 0, test.json 1); STEP_BINARY: e.g. target/release/step")
 graph_dir, out = sys.argv[1], sys.argv[2]
 rng = random.Random(int(sys.argv[3]))
 step = sys.argv[4]
