@@ -300,7 +300,7 @@ impl Run<'_> {
         // line that a later line can take again, but not the one being worked on, which is met
         // (a robot sitting on the chair it was to sit on stood up on the way to carrying that chair).
         let own_met: Vec<Fact> = if self.keeps_goals() && self.under_offered(node) {
-            self.line_fact(&self.tree.node(node).text).filter(|f| w.holds(f)).cloned().into_iter().collect()
+            self.met_line_fact(&self.tree.node(node).text).cloned().into_iter().collect()
         } else {
             Vec::new()
         };

@@ -106,6 +106,12 @@ impl Run<'_> {
         self.goals.kept.iter().find(|f| w.describe(f) == line)
     }
 
+    /// [`Self::line_fact`], when it holds now: the line is met.
+    pub(super) fn met_line_fact(&self, line: &str) -> Option<&Fact> {
+        let w = self.env.world()?;
+        self.line_fact(line).filter(|f| w.holds(f))
+    }
+
     /// Where the goals are kept: a goal line that was met when done, and whose fact a later step
     /// has made false (a target's way: SWITCHOFF of a dishwasher that is to be on, to open it and
     /// put the plates in), is offered to the root again, each time it is undone, up to

@@ -125,7 +125,7 @@ def kinds(g, ch):
         steps, goal = put_in(x, h)
         more, g2 = switch_on(h)
         steps += [s for s in more if "[WALK]" not in s and "[CLOSE]" not in s]
-        goal += [x for x in g2 if x not in goal]
+        goal += [fact for fact in g2 if fact not in goal]
         return (f"Run {words(h)} with {words(x)}", f"I put the {words(x)} in the {words(h)}, close it and turn it on.",
                 goal, [], steps)
 
@@ -185,7 +185,7 @@ def gold_works(task):
 
 ids = sorted(f[4:-5] for f in os.listdir(graph_dir) if f.startswith("file") and f.endswith(".json"))
 tasks, redrawn, per_kind = [], 0, int(os.environ.get("PER_KIND", "6"))
-n_kinds = len(kinds({"nodes": [], "edges": []}, {"id": 0}))
+n_kinds = len(kinds({"nodes": [], "edges": []}, {"id": 0}))  # (the builders draw only when called)
 for k in range(n_kinds):
     made = 0
     while made < per_kind:
