@@ -321,6 +321,14 @@ fn an_unwritable_dot_path_is_an_error_before_the_model_loads() {
     let o = run(&["plan", "put the apple in the fridge", "--dot", "/nonexistent-dir/tree.dot", "-m", "/nonexistent.gguf"]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("creating DOT file /nonexistent-dir/tree.dot"), "{}", stderr(&o));
+    // The check does not empty a DOT file an earlier run wrote: this run fails (no model) before
+    // it would write its own.
+    let dir = tempfile::tempdir().unwrap();
+    let dot = dir.path().join("tree.dot");
+    std::fs::write(&dot, "digraph earlier {}\n").unwrap();
+    let o = run(&["plan", "put the apple in the fridge", "--dot", dot.to_str().unwrap(), "-m", "/nonexistent.gguf"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&dot).unwrap(), "digraph earlier {}\n");
 }
 
 #[test]

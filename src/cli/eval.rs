@@ -166,7 +166,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
     }
     // An unwritable export path is found now, not after the whole run.
     if let Some(p) = &a.export_eai {
-        std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
+        super::check_writable(p, "")?;
     }
     let defaults = PlannerConfig::default();
     let mut cfg = PlanEvalConfig {

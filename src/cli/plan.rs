@@ -348,7 +348,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     }
     // An unwritable --dot path is found before the model loads, not after it (the tree is written at the end).
     if let Some(p) = &args.dot {
-        std::fs::File::create(p).with_context(|| format!("creating DOT file {}", p.display()))?;
+        super::check_writable(p, "DOT file ")?;
     }
     let mut env = make_env(&args.env, world, req.focus.clone(), Duration::from_secs_f64(args.action_timeout))?;
     let path = resolve_model(&args.model)?;
