@@ -223,6 +223,13 @@ pub struct DecisionArgs {
     /// nothing (LOOKAT, TOUCH, PULL), not only those the instruction names ("Watch TV": WATCH).
     #[arg(long)]
     pub all_verb_lines: bool,
+    /// Where the root sets goal lines: offer lines about every object of the task, not only
+    /// those the instruction names (where it names any).
+    #[arg(long)]
+    pub any_object_lines: bool,
+    /// Where the root sets goal lines: offer lines whose state already holds too.
+    #[arg(long)]
+    pub offer_held_lines: bool,
 }
 
 /// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
@@ -257,5 +264,7 @@ impl DecisionArgs {
         cfg.infer_goals = self.infer_goals;
         cfg.toward_lines = !self.any_step_under_lines;
         cfg.all_verb_lines = self.all_verb_lines;
+        cfg.named_lines = !self.any_object_lines;
+        cfg.skip_held_lines = !self.offer_held_lines;
     }
 }

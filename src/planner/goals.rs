@@ -139,7 +139,13 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 /// Moves and `excluded` verbs are not asked about; an action whose way names an object outside
 /// `focus` is left out, like a target's.
 /// (`instruction` `None`: every such verb.)
-pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Option<&str>) -> Vec<(String, Meaning)> {
+///
+/// Where `named` (the objects the instruction names) is not empty, a line is about them only:
+/// every object it states is named (the robot aside), and a line about the robot alone comes of
+/// an action on named objects ("character is SITTING" of SIT on the named toilet); a named room
+/// gives the line of the robot inside it. The instruction's words are the parent the goals must be
+/// congruent with: SmolLM2 chose "food_food is CLEAN" for "Put the chessboard in the freezer".
+pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Option<&str>, named: &[u32]) -> Vec<(String, Meaning)> {
     let robot = w.character();
     let objects: Vec<u32> = focus
         .iter()
@@ -147,13 +153,18 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
         .filter(|&id| id != robot && w.node(id).is_some_and(|n| !n.is_room()))
         .collect();
     let in_focus: BTreeSet<u32> = focus.iter().copied().collect();
+    let about_named = |ids: &[u32]| named.is_empty() || ids.iter().all(|id| *id == robot || named.contains(id));
     let mut out: Vec<(String, Meaning)> = Vec::new();
     let mut push = |line: String, m: Meaning| {
         if !out.iter().any(|(l, _)| *l == line) {
             out.push((line, m));
         }
     };
-    for &id in &objects {
+    for &room in named.iter().filter(|&&id| w.node(id).is_some_and(|n| n.is_room())) {
+        let f = Fact::Edge { from: robot, relation: Relation::Inside, to: room };
+        push(w.describe(&f), Meaning::Fact(f));
+    }
+    for &id in objects.iter().filter(|&&id| about_named(&[id])) {
         let Some(n) = w.node(id) else { continue };
         for (p, states) in [
             (Property::HasSwitch, [State::On, State::Off]),
@@ -184,13 +195,15 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
             }
             continue;
         }
+        let args: Vec<u32> = a.args.iter().map(|o| o.id).collect();
         for f in gained(&before, &after, &a) {
-            let stated = match &f {
-                Fact::Edge { relation, .. } => *relation != Relation::Close,
-                Fact::State { .. } => true,
-                Fact::Holds { .. } => false,
+            let (stated, ids) = match f {
+                Fact::Edge { from, relation, to } => (relation != Relation::Close, vec![from, to]),
+                Fact::State { id, .. } => (true, vec![id]),
+                Fact::Holds { .. } => (false, vec![]),
             };
-            if stated {
+            let about = if ids.iter().all(|&id| id == robot) { &args } else { &ids };
+            if stated && about_named(about) {
                 push(w.describe(&f), Meaning::Fact(f));
             }
         }
@@ -426,7 +439,7 @@ mod tests {
     fn candidates_are_what_the_world_can_state_about_the_objects_each_once() {
         let w = World::demo();
         // apple (12), fridge (10), kitchencounter (11)
-        let c = candidates(&w, &[12, 10, 11], &[], Some("touch the apple"));
+        let c = candidates(&w, &[12, 10, 11], &[], Some("touch the apple"), &[]);
         let lines: Vec<&str> = c.iter().map(|(l, _)| l.as_str()).collect();
         for l in [
             "fridge is OPEN",
@@ -447,14 +460,33 @@ mod tests {
         sorted.dedup();
         assert_eq!(sorted.len(), lines.len());
         // Excluded verbs are not asked about.
-        let c = candidates(&w, &[12, 10, 11], &[Verb::Touch, Verb::Grab], None);
+        let c = candidates(&w, &[12, 10, 11], &[Verb::Touch, Verb::Grab], None, &[]);
         assert!(!c.iter().any(|(l, _)| l == "TOUCH" || l == "character is HOLDS_RH to apple"));
         // A step that changes nothing is a line only where the instruction names its verb.
-        let c = candidates(&w, &[12, 10, 11], &[], Some("put the apple in the fridge"));
+        let c = candidates(&w, &[12, 10, 11], &[], Some("put the apple in the fridge"), &[]);
         assert!(!c.iter().any(|(_, m)| matches!(m, Meaning::Verb(_))), "{c:?}");
         assert!(c.iter().any(|(l, _)| l == "apple is INSIDE to fridge"));
-        let c = candidates(&w, &[12, 10, 11], &[], None);
+        let c = candidates(&w, &[12, 10, 11], &[], None, &[]);
         assert!(c.iter().any(|(l, _)| l == "TOUCH"), "{c:?}");
+    }
+
+    #[test]
+    fn where_the_instruction_names_objects_the_lines_are_about_them() {
+        let w = World::demo();
+        // apple (12), fridge (10), kitchencounter (11), living_room (2); the instruction names
+        // the apple and the fridge, or the living room.
+        let lines = |named: &[u32]| -> Vec<String> {
+            candidates(&w, &[12, 10, 11, 2], &[], None, named).into_iter().map(|(l, _)| l).collect()
+        };
+        let named = lines(&[12, 10]);
+        for l in ["apple is INSIDE to fridge", "fridge is CLOSED", "character is HOLDS_RH to apple", "character is FACING to fridge"] {
+            assert!(named.contains(&l.to_string()), "{l} missing from {named:?}");
+        }
+        assert!(!named.iter().any(|l| l.contains("kitchencounter")), "the counter is not named: {named:?}");
+        assert!(lines(&[]).contains(&"apple is ON to kitchencounter".to_string()), "nothing named: every line");
+        // A named room: the robot inside it.
+        assert!(lines(&[2]).contains(&"character is INSIDE to living_room".to_string()), "{:?}", lines(&[2]));
+        assert!(!named.iter().any(|l| l.contains("living_room")), "{named:?}");
     }
 
     #[test]
@@ -472,7 +504,7 @@ mod tests {
     #[test]
     fn a_taken_inferred_line_keeps_its_fact_or_names_its_verb() {
         let w = World::demo();
-        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge")));
+        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[]));
         assert!(g.kept.is_empty() && g.named_verbs.is_empty());
         g.take("fridge is CLOSED");
         g.take("TOUCH");

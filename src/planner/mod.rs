@@ -223,7 +223,9 @@ pub struct PlannerConfig {
     /// A node's steps do not undo what its earlier steps changed (SWITCHOFF after its SWITCHON, STANDUP
     /// after its SIT): a candidate step is tried on a copy of the world first. Holding and closeness
     /// are left out: they are means (a grab is undone by the put it was for). The random planner
-    /// obeys it too. A rule on the node's own steps, not a look at the goals.
+    /// obeys it too. A rule on the node's own steps, not a look at the goals; where the goals are
+    /// kept, it does not bar a step that makes one of them true (the walk into the room the task
+    /// names, after a turn to face it; the grab of the food the node had put a plate on).
     pub protect_changes: bool,
     /// Do not offer a step that would make false a fact the task asks for while it holds
     /// ([`PlanRequest::kept`]: PLUGOUT of a television that is to stay plugged in, putting down what
@@ -280,6 +282,12 @@ pub struct PlannerConfig {
     /// With `infer_goals`, offer as goal lines the verbs of every step that changes nothing
     /// (LOOKAT, TOUCH, PULL), not only those the instruction names ([`goals::names_verb`]).
     pub all_verb_lines: bool,
+    /// With `infer_goals`, where the instruction names objects, offer only lines about them
+    /// ([`goals::candidates`]): the goals the root sets are congruent with its instruction.
+    pub named_lines: bool,
+    /// With `infer_goals`, do not offer a line whose state holds now: a goal the root sets is a
+    /// change to bring about ("fridge is CLOSED" comes back once a step has opened the fridge).
+    pub skip_held_lines: bool,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
     /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
@@ -331,6 +339,8 @@ impl Default for PlannerConfig {
             infer_goals: false,
             toward_lines: true,
             all_verb_lines: false,
+            named_lines: true,
+            skip_held_lines: true,
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
             observe_budget: 600,
@@ -599,6 +609,8 @@ impl PlannerConfig {
             "infer_goals": self.infer_goals,
             "toward_lines": self.toward_lines,
             "all_verb_lines": self.all_verb_lines,
+            "named_lines": self.named_lines,
+            "skip_held_lines": self.skip_held_lines,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
@@ -689,6 +701,8 @@ impl PlannerConfig {
         // (traces written before the rule have no key: they ran without it)
         c.toward_lines = v.get("toward_lines").and_then(Value::as_bool).unwrap_or(false);
         c.all_verb_lines = v.get("all_verb_lines").and_then(Value::as_bool).unwrap_or(true);
+        c.named_lines = v.get("named_lines").and_then(Value::as_bool).unwrap_or(false);
+        c.skip_held_lines = v.get("skip_held_lines").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,

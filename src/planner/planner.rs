@@ -253,7 +253,8 @@ impl Run<'_> {
             return;
         }
         let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
-        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named);
+        let about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
+        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about);
         if candidates.is_empty() {
             return;
         }
@@ -398,6 +399,7 @@ impl Run<'_> {
         self.check_global()?;
         let hash = prompt_hash(prompt, lark);
         log_prompt(role, node, prompt);
+        tracing::trace!("{role} grammar at node {node}:\n{lark}");
         let t = Instant::now();
         let r = self.model.generate(prompt, Some(lark), &self.cfg.gen);
         let total_ms = t.elapsed().as_secs_f64() * 1e3;

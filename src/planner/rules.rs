@@ -18,27 +18,25 @@ use crate::world::{Fact, World};
 impl Run<'_> {
     /// The actions of `set` (an exact set) that undo nothing to keep and, below the root, are not
     /// idle: neither what this node's steps changed (`protect_changes`) nor what the task asks for
-    /// (`keep_goals`) is made false, and a step that would change nothing is left out
-    /// (`skip_idle`). One trial of each candidate on a copy of the world answers all three; one
+    /// (`keep_goals`) is made false (the node's own changes may give way to a step that makes a
+    /// kept goal true), and a step that would change nothing is left out (`skip_idle`). One trial of each candidate on a copy of the world answers all three; one
     /// that cannot run is left to the checks after.
     pub(super) fn keep_what_is_done(&self, set: ActionSet, st: &NodeLoop, is_root: bool) -> Result<ActionSet, StopCause> {
-        let mut protected: Vec<Fact> = Vec::new();
-        if self.cfg.protect_changes {
-            protected.extend(st.established.iter().cloned());
-        }
-        if self.keeps_goals() {
-            protected.extend(self.goals.kept.iter().cloned());
-        }
+        let established: &[Fact] = if self.cfg.protect_changes { &st.established } else { &[] };
+        let kept: &[Fact] = if self.keeps_goals() { &self.goals.kept } else { &[] };
         let idle_rule = !is_root && self.idle_rule();
         let ActionSet::Exact(list) = set else { return Ok(set) };
-        if protected.is_empty() && !idle_rule {
+        if established.is_empty() && kept.is_empty() && !idle_rule {
             return Ok(ActionSet::Exact(list));
         }
         let w = self.world()?;
         let hands = self.keeps_goals();
+        // A step that brings about a kept goal fact may undo the node's own earlier changes (the
+        // plate it put on the food does not stop it picking the food up); never a kept fact.
         let keep = |a: &Action| {
             trial(w, a).is_none_or(|after| {
-                !makes_false(w, &after, &protected)
+                !makes_false(w, &after, kept)
+                    && (!makes_false(w, &after, established) || gains_any(w, &after, kept))
                     && !(hands && takes_a_reserved_hand(w, &after, &self.goals.kept))
                     && !(idle_rule && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
             })
@@ -207,6 +205,11 @@ pub(super) const REOFFERS: usize = 3;
 /// Whether a fact of `facts` that holds `now` does not hold `after`.
 pub(super) fn makes_false(now: &World, after: &World, facts: &[Fact]) -> bool {
     facts.iter().any(|f| now.holds(f) && !after.holds(f))
+}
+
+/// Whether a fact of `facts` that does not hold `now` holds `after`.
+pub(super) fn gains_any(now: &World, after: &World, facts: &[Fact]) -> bool {
+    facts.iter().any(|f| !now.holds(f) && after.holds(f))
 }
 
 /// Whether going from `now` to `after` spoils a hold the task asks for and does not have yet: the

@@ -277,9 +277,10 @@ fn admits(lark: &str, verb: &str, object: &str) -> bool {
 /// (`"<apple> (12) "`).
 fn admits_first(lark: &str, verb: &str, object: &str) -> bool {
     let head = format!("\"[{verb}] \" (");
-    let rule = lark.lines().find_map(|l| l.split_once(&head).map(|(_, t)| t.to_string()));
-    let first = rule.as_deref().and_then(|t| t.split_whitespace().next()).unwrap_or("?").to_string();
-    lark.lines().any(|l| l.starts_with(&format!("{first}:")) && l.contains(object))
+    let rule = lark.lines().find_map(|l| l.split_once(&head).map(|(_, t)| t.to_string())).unwrap_or_default();
+    // (each alternative of the rule is `FIRST_n OBJS_m`: any of its first slots may hold it)
+    let firsts: Vec<&str> = rule.split(['(', ')', '|']).filter_map(|alt| alt.split_whitespace().next()).collect();
+    firsts.iter().any(|first| lark.lines().any(|l| l.starts_with(&format!("{first}:")) && l.contains(object)))
 }
 
 fn always(answers: &[&str], n: usize) -> Vec<String> {
@@ -1169,6 +1170,22 @@ fn below_a_goal_line_that_holds_no_target_whose_way_undoes_it_is_offered() {
     assert!(!admits(&m.grammars[1], "SWITCHON", "<television> (31)"), "{}", m.grammars[1]);
 }
 
+#[test]
+fn a_step_that_meets_a_goal_may_undo_what_its_node_did_before() {
+    use crate::world::vocab::Relation;
+    let there = "character is INSIDE to living_room";
+    let script = ["action: [TURNTO] <living_room> (2)", "action: [WALK] <living_room> (2)", "done"];
+    let kept = vec![Fact::Edge { from: 3, relation: Relation::Inside, to: 2 }];
+    let (out, m, env) = with_kept_lines(&script, &[there], kept.clone(), true);
+    // The turn made the robot face the room, a change its node keeps; the walk into the room
+    // undoes it, and is offered all the same: it makes a kept goal true (held_10_5 of the dev
+    // set ended facing the bedroom instead of walking into it).
+    assert_eq!(plan_lines(&out), ["[TURNTO] <living_room> (2)", "[WALK] <living_room> (2)"], "{:?}", m.grammars);
+    assert!(admits(&m.grammars[1], "WALK", "<living_room> (2)"), "{}", m.grammars[1]);
+    assert_eq!(out.stop, StopCause::Done);
+    assert!(env.world().unwrap().holds(&kept[0]));
+}
+
 /// Plans the demo kitchen with `lines` offered and `kept` kept (unless `keep_goals` is off),
 /// the model answering `script`: for the tests of the kept-goal rules.
 fn with_kept_lines(script: &[&str], lines: &[&str], kept: Vec<Fact>, keep_goals: bool) -> (PlanOutcome, Scripted, SimEnv) {
@@ -1253,12 +1270,46 @@ fn a_goal_line_that_already_holds_says_so_in_its_status() {
     // The demo's fridge is closed at the start.
     let mut m = Scripted::new(&[]);
     m.preferences = ["subgoal: fridge is CLOSED".to_string(), "done".to_string()].into();
-    let cfg = PlannerConfig { infer_goals: true, ..defaults() };
+    // (a line that holds is offered only with the rule that leaves such lines out turned off)
+    let cfg = PlannerConfig { infer_goals: true, skip_held_lines: false, ..defaults() };
     let req = PlanRequest::new("close the fridge", vec![]);
     let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
     assert!(out.executed.is_empty() && out.tree.node(1).text == "fridge is CLOSED", "{:?}", out.tree.to_json());
     let (status, why) = out.tree.node(1).history.last().unwrap();
     assert_eq!((status.as_str(), why.as_str()), ("executed", "it already held: nothing to do"));
+}
+
+#[test]
+fn the_root_setting_its_goals_is_offered_changes_and_asks_the_done_check_once_one_is_set() {
+    let closed = "subgoal: fridge is CLOSED".to_string();
+    let go = |skip_held_lines: bool, p_done: f64| {
+        // (the later lines' decisions, with a `done` the check never allows, answer `done`)
+        let mut m = Scripted::new(&["done"; 4]);
+        m.p_done = p_done;
+        m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}")].into();
+        m.prefer = Some(closed.clone());
+        let cfg = PlannerConfig { infer_goals: true, skip_held_lines, done_at: Some(0.5), lines_done_at: None, ..defaults() };
+        let req = PlanRequest::new("put the apple in the fridge", vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    // The fridge is closed at the start: that line is no goal to set then. Once the apple's way
+    // has opened it, the line is offered; the done check (its share of `done` below 0.5) says go
+    // on, and the root closes the fridge.
+    let (out, m) = go(true, 0.1);
+    assert!(!m.scored[0].contains(&closed) && m.scored[0].contains(&format!("subgoal: {APPLE_IN_FRIDGE}")), "{:?}", m.scored[0]);
+    assert_eq!(m.scored[1].first().map(String::as_str), Some("done"), "the done check comes first: {:?}", m.scored);
+    assert!(m.scored[2].contains(&closed) && !m.scored[2].iter().any(|a| a == "done"), "{:?}", m.scored[2]);
+    let lines = plan_lines(&out);
+    assert_eq!(lines[..5], [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", "[PUTIN] <apple> (12) <fridge> (10)", "[CLOSE] <fridge> (10)"], "{lines:?}");
+    // A confident `done` ends the root after the first line, the fridge left open.
+    let (out, m) = go(true, 0.9);
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(m.scored.len(), 2, "the line, then the done check: {:?}", m.scored);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"));
+    // Without the rule the closed fridge's line is offered from the start.
+    let (_, m) = go(false, 0.9);
+    assert!(m.scored[0].contains(&closed), "{:?}", m.scored[0]);
 }
 
 #[test]
