@@ -209,16 +209,6 @@ impl Run<'_> {
                 Some(t) => t,
                 None => return Ok(Proposed::Nothing),
             }
-        } else if menu.whole && dg.allow_done && self.cfg.done_at.is_some() {
-            // The root setting its own goals: `done` by the done check (its first word's share,
-            // as elsewhere), else the likeliest whole line. Scored whole against the lines, the
-            // one-word `done` won once a single line was set (SmolLM2 on the held-out dev set:
-            // 16 of 66 tasks, against 29 with the check).
-            if self.done_check(node, &prompt, true, self.cfg.done_at)? {
-                "done".to_string()
-            } else {
-                self.likeliest(node, &prompt, &DecomposeGrammar { allow_done: false, ..dg.clone() })?
-            }
         } else if menu.whole {
             self.likeliest(node, &prompt, dg)?
         } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal, menu.done_at)? {

@@ -19,8 +19,9 @@ impl Run<'_> {
     /// The actions of `set` (an exact set) that undo nothing to keep and, below the root, are not
     /// idle: neither what this node's steps changed (`protect_changes`) nor what the task asks for
     /// (`keep_goals`) is made false (the node's own changes may give way to a step that makes a
-    /// kept goal true), and a step that would change nothing is left out (`skip_idle`). One trial of each candidate on a copy of the world answers all three; one
-    /// that cannot run is left to the checks after.
+    /// kept goal true), and a step that would change nothing is left out (`skip_idle`). One trial
+    /// of each candidate on a copy of the world answers all three; one that cannot run is left to
+    /// the checks after.
     pub(super) fn keep_what_is_done(&self, set: ActionSet, st: &NodeLoop, is_root: bool) -> Result<ActionSet, StopCause> {
         let established: &[Fact] = if self.cfg.protect_changes { &st.established } else { &[] };
         let kept: &[Fact] = if self.keeps_goals() { &self.goals.kept } else { &[] };

@@ -1280,35 +1280,26 @@ fn a_goal_line_that_already_holds_says_so_in_its_status() {
 }
 
 #[test]
-fn the_root_setting_its_goals_is_offered_changes_and_asks_the_done_check_once_one_is_set() {
+fn the_root_setting_its_goals_is_offered_only_changes() {
     let closed = "subgoal: fridge is CLOSED".to_string();
-    let go = |skip_held_lines: bool, p_done: f64| {
-        // (the later lines' decisions, with a `done` the check never allows, answer `done`)
-        let mut m = Scripted::new(&["done"; 4]);
-        m.p_done = p_done;
-        m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}")].into();
-        m.prefer = Some(closed.clone());
-        let cfg = PlannerConfig { infer_goals: true, skip_held_lines, done_at: Some(0.5), lines_done_at: None, ..defaults() };
+    let go = |skip_held_lines: bool| {
+        let mut m = Scripted::new(&[]);
+        m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}"), closed.clone(), "done".to_string()].into();
+        let cfg = PlannerConfig { infer_goals: true, skip_held_lines, lines_done_at: None, ..defaults() };
         let req = PlanRequest::new("put the apple in the fridge", vec![]);
         let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
         (out, m)
     };
     // The fridge is closed at the start: that line is no goal to set then. Once the apple's way
-    // has opened it, the line is offered; the done check (its share of `done` below 0.5) says go
-    // on, and the root closes the fridge.
-    let (out, m) = go(true, 0.1);
-    assert!(!m.scored[0].contains(&closed) && m.scored[0].contains(&format!("subgoal: {APPLE_IN_FRIDGE}")), "{:?}", m.scored[0]);
-    assert_eq!(m.scored[1].first().map(String::as_str), Some("done"), "the done check comes first: {:?}", m.scored);
-    assert!(m.scored[2].contains(&closed) && !m.scored[2].iter().any(|a| a == "done"), "{:?}", m.scored[2]);
-    let lines = plan_lines(&out);
-    assert_eq!(lines[..5], [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", "[PUTIN] <apple> (12) <fridge> (10)", "[CLOSE] <fridge> (10)"], "{lines:?}");
-    // A confident `done` ends the root after the first line, the fridge left open.
-    let (out, m) = go(true, 0.9);
+    // has opened it, the line is offered, and the root closes the fridge.
+    let (out, m) = go(true);
     assert_eq!(out.stop, StopCause::Done);
-    assert_eq!(m.scored.len(), 2, "the line, then the done check: {:?}", m.scored);
-    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"));
+    assert!(!m.scored[0].contains(&closed) && m.scored[0].contains(&format!("subgoal: {APPLE_IN_FRIDGE}")), "{:?}", m.scored[0]);
+    assert!(m.scored[1].contains(&closed), "{:?}", m.scored[1]);
+    let lines = plan_lines(&out);
+    assert_eq!(lines, [WALK_APPLE, GRAB_APPLE, "[OPEN] <fridge> (10)", "[PUTIN] <apple> (12) <fridge> (10)", "[CLOSE] <fridge> (10)"]);
     // Without the rule the closed fridge's line is offered from the start.
-    let (_, m) = go(false, 0.9);
+    let (_, m) = go(false);
     assert!(m.scored[0].contains(&closed), "{:?}", m.scored[0]);
 }
 
