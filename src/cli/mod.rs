@@ -77,7 +77,6 @@ fn run(command: Command) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// `--log`: rejected unless tracing can read it (a typo would otherwise silently log nothing).
 /// Fails now if `path` cannot be written, so that an output written at the end of a long run is not
 /// found unwritable only then. An existing file is left as it is (opened to append, not truncated)
 /// until the run writes it: a run that fails first loses no earlier output.
@@ -91,6 +90,7 @@ pub(crate) fn check_writable(path: &std::path::Path, what: &str) -> anyhow::Resu
     Ok(())
 }
 
+/// `--log`: rejected unless tracing can read it (a typo would otherwise silently log nothing).
 fn parse_log_filter(s: &str) -> Result<String, String> {
     tracing_subscriber::EnvFilter::builder()
         .parse(s)

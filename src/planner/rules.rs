@@ -31,14 +31,13 @@ impl Run<'_> {
             return Ok(ActionSet::Exact(list));
         }
         let w = self.world()?;
-        let hands = self.keeps_goals();
         // A step that brings about a kept goal fact may undo the node's own earlier changes (the
         // plate it put on the food does not stop it picking the food up); never a kept fact.
         let keep = |a: &Action| {
             trial(w, a).is_none_or(|after| {
                 !makes_false(w, &after, kept)
                     && (!makes_false(w, &after, established) || gains_any(w, &after, kept))
-                    && !(hands && takes_a_reserved_hand(w, &after, &self.goals.kept))
+                    && !takes_a_reserved_hand(w, &after, kept)
                     && !(idle_rule && self.skips_idle(a.verb) && changes_nothing(w, &after, a))
             })
         };
