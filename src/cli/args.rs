@@ -220,11 +220,13 @@ pub struct DecisionArgs {
     #[arg(long)]
     pub any_step_under_lines: bool,
     /// Where the root sets goal lines: offer as lines the verbs of every step that changes
-    /// nothing (LOOKAT, TOUCH, PULL), not only those the instruction names ("Watch TV": WATCH).
+    /// nothing (LOOKAT, TOUCH, PULL), not only those the instruction names ("Watch TV": WATCH),
+    /// and every posture of the robot, not only the one whose verb it names ("sit": SITTING).
     #[arg(long)]
     pub all_verb_lines: bool,
     /// Where the root sets goal lines: offer lines about every object of the task, not only
-    /// those the instruction names (where it names any).
+    /// those the instruction names (where it names any), and meet a line about the robot alone
+    /// on any object (by default on a named one, where it can be: "sit on the sofa").
     #[arg(long)]
     pub any_object_lines: bool,
     /// Where the root sets goal lines: offer lines whose state already holds too.

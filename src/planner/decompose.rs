@@ -364,7 +364,19 @@ impl Run<'_> {
         let achieving: Vec<Action> = match self.goals.meaning(text) {
             Some(goals::Meaning::Verb(v)) => list.iter().filter(|a| a.verb == *v).cloned().collect(),
             Some(goals::Meaning::Fact(f)) => {
-                list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect()
+                let making: Vec<Action> =
+                    list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect();
+                // A line about the robot alone ("character is SITTING") came of an action on an
+                // object the instruction names: made true there, where it can be (SmolLM2 sat
+                // on a chair when asked to sit on the sofa).
+                let named = &self.goals.named_objects;
+                let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
+                let on_named: Vec<Action> = making
+                    .iter()
+                    .filter(|a| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id)))
+                    .cloned()
+                    .collect();
+                if alone && !on_named.is_empty() { on_named } else { making }
             }
             None => {
                 let verbs = goals::line_verbs(text);

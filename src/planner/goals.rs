@@ -40,6 +40,8 @@ pub struct Goals {
     pub kept: Vec<Fact>,
     /// Verbs a goal names as actions the plan must include (idle steps of these stay offered).
     pub named_verbs: Vec<Verb>,
+    /// For inferred lines, the objects the instruction names (see `candidates`).
+    pub named_objects: Vec<u32>,
 }
 
 impl Goals {
@@ -51,6 +53,7 @@ impl Goals {
             meanings: Vec::new(),
             kept: req.kept.clone(),
             named_verbs: req.named_verbs.clone(),
+            named_objects: Vec::new(),
         }
     }
 
@@ -61,9 +64,9 @@ impl Goals {
     }
 
     /// Candidate lines for the model to choose among (see [`candidates`]); nothing is kept yet.
-    pub fn inferred(candidates: Vec<(String, Meaning)>) -> Goals {
+    pub fn inferred(candidates: Vec<(String, Meaning)>, named_objects: Vec<u32>) -> Goals {
         let (lines, meanings) = candidates.into_iter().unzip();
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new() }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects }
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -142,9 +145,11 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 ///
 /// Where `named` (the objects the instruction names) is not empty, a line is about them only:
 /// every object it states is named (the robot aside), and a line about the robot alone comes of
-/// an action on named objects ("character is SITTING" of SIT on the named toilet); a named room
-/// gives the line of the robot inside it. The instruction's words are the parent the goals must be
-/// congruent with: SmolLM2 chose "food_food is CLEAN" for "Put the chessboard in the freezer".
+/// an action on named objects ("character is SITTING" of SIT on the named toilet), and where the
+/// `instruction` names the verb of such a line ("sit"), not of one whose verb it does not name
+/// (LYING of LIE); a named room gives the line of the robot inside it. The instruction's words
+/// are the parent the goals must be congruent with: SmolLM2 chose "food_food is CLEAN" for "Put
+/// the chessboard in the freezer".
 pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Option<&str>, named: &[u32]) -> Vec<(String, Meaning)> {
     let robot = w.character();
     let objects: Vec<u32> = focus
@@ -180,6 +185,8 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
         }
     }
     let mut idle: Vec<Verb> = Vec::new();
+    // Lines about the robot alone (its posture), with the verbs that bring them about.
+    let mut robot_lines: Vec<(String, Verb)> = Vec::new();
     for a in typed_actions(w, &objects) {
         if matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find) || excluded.contains(&a.verb) {
             continue;
@@ -202,8 +209,12 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
                 Fact::State { id, .. } => (true, vec![id]),
                 Fact::Holds { .. } => (false, vec![]),
             };
-            let about = if ids.iter().all(|&id| id == robot) { &args } else { &ids };
+            let alone = ids.iter().all(|&id| id == robot);
+            let about = if alone { &args } else { &ids };
             if stated && about_named(about) {
+                if alone {
+                    robot_lines.push((w.describe(&f), a.verb));
+                }
                 push(w.describe(&f), Meaning::Fact(f));
             }
         }
@@ -212,6 +223,16 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
     idle.sort();
     for v in idle {
         push(v.name().to_string(), Meaning::Verb(v));
+    }
+    // Where the instruction names the verb of one of the robot's postures ("sit on the bench"),
+    // the others are not its goals: SmolLM2 lay down on the bench it was asked to sit on.
+    if let Some(t) = instruction {
+        if robot_lines.iter().any(|(_, v)| names_verb(t, *v)) {
+            let unnamed = |l: &str| {
+                robot_lines.iter().any(|(rl, _)| rl == l) && !robot_lines.iter().any(|(rl, v)| rl == l && names_verb(t, *v))
+            };
+            out.retain(|(l, _)| !unnamed(l));
+        }
     }
     out
 }
@@ -471,6 +492,21 @@ mod tests {
     }
 
     #[test]
+    fn a_posture_the_instruction_names_leaves_out_the_others() {
+        let w = World::demo();
+        // The sofa (30) affords sitting and lying.
+        let lines = |t: &str| -> Vec<String> { candidates(&w, &[30], &[], Some(t), &[30]).into_iter().map(|(l, _)| l).collect() };
+        let sit = lines("sit on the sofa");
+        assert!(sit.contains(&"character is SITTING".to_string()) && !sit.contains(&"character is LYING".to_string()), "{sit:?}");
+        assert!(sit.contains(&"character is ON to sofa".to_string()), "{sit:?}");
+        let lie = lines("I am tired, so I lie down on the sofa");
+        assert!(lie.contains(&"character is LYING".to_string()) && !lie.contains(&"character is SITTING".to_string()), "{lie:?}");
+        // Naming neither posture keeps both.
+        let relax = lines("relax on the sofa");
+        assert!(relax.contains(&"character is LYING".to_string()) && relax.contains(&"character is SITTING".to_string()), "{relax:?}");
+    }
+
+    #[test]
     fn where_the_instruction_names_objects_the_lines_are_about_them() {
         let w = World::demo();
         // apple (12), fridge (10), kitchencounter (11), living_room (2); the instruction names
@@ -504,7 +540,7 @@ mod tests {
     #[test]
     fn a_taken_inferred_line_keeps_its_fact_or_names_its_verb() {
         let w = World::demo();
-        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[]));
+        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[]), Vec::new());
         assert!(g.kept.is_empty() && g.named_verbs.is_empty());
         g.take("fridge is CLOSED");
         g.take("TOUCH");

@@ -280,10 +280,12 @@ pub struct PlannerConfig {
     /// not the world, say what is congruent with it. A shown line's fact is never worked out so.
     pub toward_lines: bool,
     /// With `infer_goals`, offer as goal lines the verbs of every step that changes nothing
-    /// (LOOKAT, TOUCH, PULL), not only those the instruction names ([`goals::names_verb`]).
+    /// (LOOKAT, TOUCH, PULL), not only those the instruction names ([`goals::names_verb`]), and
+    /// every posture, not only the one whose verb it names.
     pub all_verb_lines: bool,
     /// With `infer_goals`, where the instruction names objects, offer only lines about them
-    /// ([`goals::candidates`]): the goals the root sets are congruent with its instruction.
+    /// ([`goals::candidates`]), and meet a line about the robot alone on them where it can be
+    /// (`toward_own_line`): the goals the root sets are congruent with its instruction.
     pub named_lines: bool,
     /// With `infer_goals`, do not offer a line whose state holds now: a goal the root sets is a
     /// change to bring about ("fridge is CLOSED" comes back once a step has opened the fridge).

@@ -258,7 +258,7 @@ impl Run<'_> {
         if candidates.is_empty() {
             return;
         }
-        self.goals = Goals::inferred(candidates);
+        self.goals = Goals::inferred(candidates, about);
         self.prompter = self.prompter.clone().setting_goals();
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
     }

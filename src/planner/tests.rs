@@ -1379,6 +1379,29 @@ fn below_a_line_the_model_set_only_the_steps_that_make_it_true_are_offered() {
     assert!(m.grammars[0].contains("\"[PUTBACK] \""), "{}", m.grammars[0]);
 }
 
+/// A line about the robot alone, set for an instruction that names its object, is made true on
+/// that object: "character is SITTING" for "sit on the sofa" by sitting on the sofa (30), though
+/// the demo's chair (19) would make it true too.
+#[test]
+fn a_posture_line_is_taken_on_the_object_the_instruction_names() {
+    let infer = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("sit on the sofa", vec![]);
+    let run = |cfg: &PlannerConfig, answers: &[&str]| {
+        let mut m = Scripted::new(answers);
+        m.preferences = ["subgoal: character is SITTING".to_string(), "done".to_string()].into();
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    // With the rule the one sitting step left is on the sofa: no model is asked below the line.
+    let (out, _) = run(&infer, &[]);
+    assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
+    assert_eq!(plan_lines(&out), ["[WALK] <sofa> (30)", "[SIT] <sofa> (30)"]);
+    // Without the instruction's objects (every object's lines) both seats make the line true.
+    let (_, m) = run(&PlannerConfig { named_lines: false, ..infer.clone() }, &["subgoal: [SIT] <sofa> (30)", "done", "done"]);
+    let below = m.grammars.first().expect("a call below the line");
+    assert!(below.contains("<chair> (19)") && below.contains("<sofa> (30)"), "{below}");
+}
+
 /// A decision's calls are one node's latency: its done check, the proposal, and what judged or
 /// scored it; a done check that answered `done` is a decision of its own.
 #[test]
