@@ -370,13 +370,13 @@ impl Run<'_> {
                 // object the instruction names: made true there, where it can be (SmolLM2 sat
                 // on a chair when asked to sit on the sofa).
                 let named = &self.goals.named_objects;
+                let on_named = |a: &&Action| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id));
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
-                let on_named: Vec<Action> = making
-                    .iter()
-                    .filter(|a| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id)))
-                    .cloned()
-                    .collect();
-                if alone && !on_named.is_empty() { on_named } else { making }
+                if alone && making.iter().any(|a| on_named(&a)) {
+                    making.into_iter().filter(|a| on_named(&a)).collect()
+                } else {
+                    making
+                }
             }
             None => {
                 let verbs = goals::line_verbs(text);

@@ -212,10 +212,11 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
             let alone = ids.iter().all(|&id| id == robot);
             let about = if alone { &args } else { &ids };
             if stated && about_named(about) {
+                let line = w.describe(&f);
                 if alone {
-                    robot_lines.push((w.describe(&f), a.verb));
+                    robot_lines.push((line.clone(), a.verb));
                 }
-                push(w.describe(&f), Meaning::Fact(f));
+                push(line, Meaning::Fact(f));
             }
         }
     }
@@ -227,11 +228,9 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
     // Where the instruction names the verb of one of the robot's postures ("sit on the bench"),
     // the others are not its goals: SmolLM2 lay down on the bench it was asked to sit on.
     if let Some(t) = instruction {
-        if robot_lines.iter().any(|(_, v)| names_verb(t, *v)) {
-            let unnamed = |l: &str| {
-                robot_lines.iter().any(|(rl, _)| rl == l) && !robot_lines.iter().any(|(rl, v)| rl == l && names_verb(t, *v))
-            };
-            out.retain(|(l, _)| !unnamed(l));
+        let said: Vec<&String> = robot_lines.iter().filter(|(_, v)| names_verb(t, *v)).map(|(l, _)| l).collect();
+        if !said.is_empty() {
+            out.retain(|(l, _)| said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
         }
     }
     out
