@@ -229,6 +229,11 @@ pub struct DecisionArgs {
     /// on any object (by default on a named one, where it can be: "sit on the sofa").
     #[arg(long)]
     pub any_object_lines: bool,
+    /// Where the root sets goal lines: offer an object's lines of verbs the instruction does not
+    /// say of it (by default "open the fridge" leaves out "fridge is ON"), and both relations
+    /// between two objects it names, whichever it says ("the bread on the plate": ON, not INSIDE).
+    #[arg(long)]
+    pub unsaid_lines: bool,
     /// Where the root sets goal lines: offer lines whose state already holds too.
     #[arg(long)]
     pub offer_held_lines: bool,
@@ -267,6 +272,7 @@ impl DecisionArgs {
         cfg.toward_lines = !self.any_step_under_lines;
         cfg.all_verb_lines = self.all_verb_lines;
         cfg.named_lines = !self.any_object_lines;
+        cfg.said_lines = !self.unsaid_lines;
         cfg.skip_held_lines = !self.offer_held_lines;
     }
 }

@@ -372,8 +372,16 @@ impl Run<'_> {
                 let named = &self.goals.named_objects;
                 let on_named = |a: &&Action| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id));
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
-                if alone && making.iter().any(|a| on_named(&a)) {
+                let making = if alone && making.iter().any(|a| on_named(&a)) {
                     making.into_iter().filter(|a| on_named(&a)).collect()
+                } else {
+                    making
+                };
+                // And by a verb the instruction says of the object, where one does it ("sit on
+                // the sofa": SIT, not LIE, for "character is ON to sofa").
+                let said = |a: &&Action| a.args.first().is_some_and(|o| self.goals.wording.verbs_of(o.id).contains(&a.verb));
+                if making.iter().any(|a| said(&a)) {
+                    making.into_iter().filter(|a| said(&a)).collect()
                 } else {
                     making
                 }

@@ -42,6 +42,8 @@ pub struct Goals {
     pub named_verbs: Vec<Verb>,
     /// For inferred lines, the objects the instruction names (see `candidates`).
     pub named_objects: Vec<u32>,
+    /// For inferred lines, what the instruction says of them ([`Wording`]; empty when not read).
+    pub wording: Wording,
 }
 
 impl Goals {
@@ -54,6 +56,7 @@ impl Goals {
             kept: req.kept.clone(),
             named_verbs: req.named_verbs.clone(),
             named_objects: Vec::new(),
+            wording: Wording::default(),
         }
     }
 
@@ -64,9 +67,9 @@ impl Goals {
     }
 
     /// Candidate lines for the model to choose among (see [`candidates`]); nothing is kept yet.
-    pub fn inferred(candidates: Vec<(String, Meaning)>, named_objects: Vec<u32>) -> Goals {
+    pub fn inferred(candidates: Vec<(String, Meaning)>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings) = candidates.into_iter().unzip();
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording }
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -150,7 +153,14 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 /// (LYING of LIE); a named room gives the line of the robot inside it. The instruction's words
 /// are the parent the goals must be congruent with: SmolLM2 chose "food_food is CLEAN" for "Put
 /// the chessboard in the freezer".
-pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Option<&str>, named: &[u32]) -> Vec<(String, Meaning)> {
+pub fn candidates(
+    w: &World,
+    focus: &[u32],
+    excluded: &[Verb],
+    instruction: Option<&str>,
+    named: &[u32],
+    wording: Option<&Wording>,
+) -> Vec<(String, Meaning)> {
     let robot = w.character();
     let objects: Vec<u32> = focus
         .iter()
@@ -187,6 +197,8 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
     let mut idle: Vec<Verb> = Vec::new();
     // Lines about the robot alone (its posture), with the verbs that bring them about.
     let mut robot_lines: Vec<(String, Verb)> = Vec::new();
+    // Every fact line an action brings about, with its verb.
+    let mut made_by: Vec<(String, Verb)> = Vec::new();
     for a in typed_actions(w, &objects) {
         if matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find) || excluded.contains(&a.verb) {
             continue;
@@ -216,6 +228,7 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
                 if alone {
                     robot_lines.push((line.clone(), a.verb));
                 }
+                made_by.push((line.clone(), a.verb));
                 push(line, Meaning::Fact(f));
             }
         }
@@ -233,7 +246,129 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
             out.retain(|(l, _)| said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
         }
     }
+    // A state that does not hold and that no action brings about (a door in no room cannot be
+    // walked to and closed) is not a goal a plan can meet.
+    out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::State { .. }) if !w.holds(f) && !made_by.iter().any(|(ml, _)| ml == l)));
+    if let Some(words) = wording {
+        words.keep_said(robot, &made_by, &mut out);
+    }
     out
+}
+
+/// What an instruction says plainly of the objects it names, read from its words: the parent
+/// the goal lines must be congruent with (SmolLM2 set "fridge is ON" for "open the fridge",
+/// "bread is INSIDE to plate" for "put the bread on the plate", and grabbed the chair it was
+/// asked to sit on).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Wording {
+    /// A verb said of an object: the verb's word, then only articles and particles before the
+    /// object's ("open the fridge", "sit down on the chair").
+    pub said: Vec<(u32, Verb)>,
+    /// "A in B", "A on B" (only articles between): A's relation to B.
+    pub relations: Vec<(u32, Relation, u32)>,
+}
+
+impl Wording {
+    /// Reads `text` over the objects of `focus` ([`instruction_objects`]' names).
+    pub fn of(w: &World, focus: &[u32], text: &str) -> Wording {
+        let words = words_of(text);
+        let found = mentions(w, focus, text);
+        let only = |between: &[String], allowed: &dyn Fn(&str) -> bool| between.iter().all(|x| allowed(x));
+        let mut said: Vec<(u32, Verb)> = Vec::new();
+        for k in 0..words.len() {
+            // The verbs a word names, or a phrase beginning there, and the word after it.
+            let mut verbs: Vec<Verb> = Verb::ALL.iter().copied().filter(|&v| word_names_verb(&words[k], v)).collect();
+            let mut end = k + 1;
+            for (phrase, of) in VERB_PHRASES {
+                let fits = |(x, p): (&String, &&str)| x == p || (p.len() >= 4 && x.starts_with(p));
+                if words.len() >= k + phrase.len() && words[k..].iter().zip(phrase.iter()).all(fits) {
+                    verbs.extend(of.iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
+                    end = end.max(k + phrase.len());
+                }
+            }
+            let Some((j, _, ids)) = found.iter().find(|(j, _, _)| *j >= end) else { continue };
+            if verbs.is_empty() || !only(&words[end..*j], &|x| DETERMINERS.contains(&x) || PARTICLES.contains(&x)) {
+                continue;
+            }
+            for &id in ids {
+                said.extend(verbs.iter().map(|&v| (id, v)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
+            }
+        }
+        let mut relations = Vec::new();
+        for pair in found.windows(2) {
+            let ((_, i, a), (j, _, b)) = (&pair[0], &pair[1]);
+            let between = &words[*i..*j];
+            let says = |preps: &[&str]| {
+                between.iter().any(|x| preps.contains(&x.as_str()))
+                    && only(between, &|x| DETERMINERS.contains(&x) || preps.contains(&x) || x == "top" || x == "of")
+            };
+            let relation = if says(&["in", "into", "inside"]) {
+                Relation::Inside
+            } else if says(&["on", "onto"]) {
+                Relation::On
+            } else {
+                continue;
+            };
+            relations.extend(a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))));
+        }
+        Wording { said, relations }
+    }
+
+    /// The verbs said of `id`.
+    pub fn verbs_of(&self, id: u32) -> Vec<Verb> {
+        self.said.iter().filter(|(o, _)| *o == id).map(|(_, v)| *v).collect()
+    }
+
+    /// Leaves out of `out` what the words rule out, where what they say is offered:
+    /// - of an object a verb is said of, the lines about it alone (its states, the robot's
+    ///   relations to it) that no verb said of it brings about;
+    /// - of "A in B" ("A on B"), the line "A is ON to B" ("INSIDE").
+    ///
+    /// `made_by` is every fact line with a verb that brings it about; a state line is also of the
+    /// verb that sets that state (SWITCHON for ON).
+    fn keep_said(&self, robot: u32, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) {
+        let verbs_of_line = |line: &str, m: &Meaning| -> Vec<Verb> {
+            let mut v: Vec<Verb> = made_by.iter().filter(|(l, _)| l == line).map(|(_, v)| *v).collect();
+            if let Meaning::Fact(Fact::State { state, .. }) = m {
+                v.extend(state_verb(*state));
+            }
+            v
+        };
+        let alone_on = |m: &Meaning, x: u32| match *m {
+            Meaning::Fact(Fact::State { id, .. }) => id == x,
+            Meaning::Fact(Fact::Edge { from, to, .. }) => (from == robot && to == x) || (from == x && to == robot),
+            _ => false,
+        };
+        let objects: BTreeSet<u32> = self.said.iter().map(|(id, _)| *id).collect();
+        for x in objects {
+            let verbs = self.verbs_of(x);
+            let of_said = |(l, m): &(String, Meaning)| verbs_of_line(l, m).iter().any(|v| verbs.contains(v));
+            if out.iter().any(|c| alone_on(&c.1, x) && of_said(c)) {
+                out.retain(|c| !alone_on(&c.1, x) || of_said(c));
+            }
+        }
+        for &(from, keep, to) in &self.relations {
+            let other = if keep == Relation::Inside { Relation::On } else { Relation::Inside };
+            let edge = |relation| Meaning::Fact(Fact::Edge { from, relation, to });
+            if out.iter().any(|(_, m)| *m == edge(keep)) {
+                out.retain(|(_, m)| *m != edge(other));
+            }
+        }
+    }
+}
+
+/// The verb that sets `state`, for the states a goal line may ask of an object's switch, door or
+/// plug.
+fn state_verb(state: State) -> Option<Verb> {
+    Some(match state {
+        State::On => Verb::SwitchOn,
+        State::Off => Verb::SwitchOff,
+        State::Open => Verb::Open,
+        State::Closed => Verb::Close,
+        State::PluggedIn => Verb::PlugIn,
+        State::PluggedOut => Verb::PlugOut,
+        _ => return None,
+    })
 }
 
 /// Whether `text` names `v`: a word of it begins with the verb's stem, its name in lower case up
@@ -241,11 +376,16 @@ pub fn candidates(w: &World, focus: &[u32], excluded: &[Verb], instruction: Opti
 /// "e" ("typ" for TYPE: "typing"), so "Watch TV", "Read a book" and "look at the picture" name
 /// WATCH, READ and LOOKAT.
 pub fn names_verb(text: &str, v: Verb) -> bool {
+    words_of(text).iter().any(|w| word_names_verb(w, v))
+}
+
+/// Whether one lower-case `word` names `v` ([`names_verb`]).
+fn word_names_verb(word: &str, v: Verb) -> bool {
     let name = v.name().to_lowercase();
     let stem = name.split('_').next().unwrap_or(&name);
     let stem = stem.strip_suffix("at").filter(|s| s.len() >= 3).unwrap_or(stem);
     let stem = stem.strip_suffix('e').filter(|s| s.len() >= 3).unwrap_or(stem);
-    text.to_lowercase().split(|c: char| !c.is_alphanumeric()).any(|w| w.starts_with(stem))
+    word.starts_with(stem)
 }
 
 /// Words that begin a noun phrase in an instruction ("put *the* apple in *my* fridge").
@@ -256,6 +396,26 @@ const PHRASE_ENDS: &[&str] = &[
     "in", "into", "inside", "on", "onto", "to", "at", "from", "with", "under", "near", "by", "of", "for", "and", "or",
     "then", "off", "out", "up", "down", "back",
 ];
+
+/// Everyday phrases for the embodiment's verbs that do not begin with the verb's name ("pick up
+/// the phone": GRAB; "turn on the lamp": SWITCHON). A word of four letters or more also matches
+/// its longer forms ("turning", "switched").
+const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
+    (&["pick", "up"], &[Verb::Grab]),
+    (&["take"], &[Verb::Grab]),
+    (&["hold"], &[Verb::Grab]),
+    (&["turn", "on"], &[Verb::SwitchOn]),
+    (&["switch", "on"], &[Verb::SwitchOn]),
+    (&["turn", "off"], &[Verb::SwitchOff]),
+    (&["switch", "off"], &[Verb::SwitchOff]),
+    (&["shut"], &[Verb::Close]),
+    (&["plug", "in"], &[Verb::PlugIn]),
+    (&["unplug"], &[Verb::PlugOut]),
+    (&["clean"], &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse]),
+];
+
+/// Words that may come between a verb and its object ("sit *down on* the chair").
+const PARTICLES: &[&str] = &["on", "onto", "in", "into", "inside", "at", "to", "up", "down", "off", "out", "over"];
 
 /// Words that never name an object by themselves, though some class names contain them.
 const NOT_NAMES: &[&str] = &["the", "and", "for", "with", "from", "into", "onto", "then", "all", "both", "off", "out"];
@@ -288,8 +448,23 @@ fn word_forms(word: &str) -> Vec<&str> {
 /// washing_machine, "table" for kitchentable), or, failing that, a few everyday words name a
 /// class of another name ("tv" for television, [`ALIASES`]). `(id)` names its object.
 pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
+    let named: Vec<u32> = mentions(w, focus, text).into_iter().flat_map(|(_, _, ids)| ids).collect();
+    focus.iter().copied().filter(|id| named.contains(id)).collect()
+}
+
+/// The words of `text` as [`mentions`] counts them: lower case, split at anything not a letter
+/// or a digit.
+fn words_of(text: &str) -> Vec<String> {
+    text.to_lowercase().split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).map(String::from).collect()
+}
+
+/// Where `text` names objects of `focus` ([`instruction_objects`]' rules): the words of each
+/// mention (the index of its first, and of the one after its last, in [`words_of`]) and the
+/// objects it names, in the order of the text.
+fn mentions(w: &World, focus: &[u32], text: &str) -> Vec<(usize, usize, Vec<u32>)> {
     let lower = text.to_lowercase();
-    let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).collect();
+    let words = words_of(text);
+    let words: Vec<&str> = words.iter().map(String::as_str).collect();
     let parts = |class: &str| -> Vec<String> {
         class.to_lowercase().split(|c: char| !c.is_alphanumeric()).filter(|x| !x.is_empty()).map(String::from).collect()
     };
@@ -300,7 +475,7 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
         .filter(|(_, p)| !p.is_empty())
         .collect();
     let singular = |x: &str| -> Vec<String> { word_forms(x).into_iter().map(String::from).collect() };
-    let mut named: Vec<u32> = Vec::new();
+    let mut named: Vec<(usize, usize, Vec<u32>)> = Vec::new();
     let mut taken = vec![false; words.len()];
     let mut i = 0;
     'words: while i < words.len() {
@@ -310,7 +485,7 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
             let hits: Vec<u32> =
                 objects.iter().filter(|(_, p)| forms.contains(&p.concat())).map(|(id, _)| *id).collect();
             if !hits.is_empty() {
-                named.extend(hits);
+                named.push((i, i + n, hits));
                 taken[i..i + n].iter_mut().for_each(|t| *t = true);
                 i += n;
                 continue 'words;
@@ -320,6 +495,12 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
     }
     for (k, x) in words.iter().enumerate() {
         if taken[k] || NOT_NAMES.contains(x) {
+            continue;
+        }
+        if let Ok(id) = x.parse::<u32>() {
+            if id != w.character() && focus.contains(&id) && lower.contains(&format!("({id})")) {
+                named.push((k, k + 1, vec![id]));
+            }
             continue;
         }
         let forms = singular(x);
@@ -335,18 +516,19 @@ pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
             .map(|(id, _)| *id)
             .collect();
         if !by_part.is_empty() {
-            named.extend(by_part);
+            named.push((k, k + 1, by_part));
             continue;
         }
         let aliases: Vec<&str> =
             ALIASES.iter().filter(|(word, _)| forms.iter().any(|f| f == word)).map(|&(_, class)| class).collect();
-        named.extend(objects.iter().filter(|(_, p)| aliases.contains(&p.concat().as_str())).map(|(id, _)| *id));
+        let by_alias: Vec<u32> =
+            objects.iter().filter(|(_, p)| aliases.contains(&p.concat().as_str())).map(|(id, _)| *id).collect();
+        if !by_alias.is_empty() {
+            named.push((k, k + 1, by_alias));
+        }
     }
-    focus
-        .iter()
-        .copied()
-        .filter(|&id| id != w.character() && (named.contains(&id) || text.contains(&format!("({id})"))))
-        .collect()
+    named.sort_by_key(|(k, _, _)| *k);
+    named
 }
 
 /// The noun phrases of `instruction` (the words after an article or a possessive, up to a
@@ -459,7 +641,7 @@ mod tests {
     fn candidates_are_what_the_world_can_state_about_the_objects_each_once() {
         let w = World::demo();
         // apple (12), fridge (10), kitchencounter (11)
-        let c = candidates(&w, &[12, 10, 11], &[], Some("touch the apple"), &[]);
+        let c = candidates(&w, &[12, 10, 11], &[], Some("touch the apple"), &[], None);
         let lines: Vec<&str> = c.iter().map(|(l, _)| l.as_str()).collect();
         for l in [
             "fridge is OPEN",
@@ -480,13 +662,13 @@ mod tests {
         sorted.dedup();
         assert_eq!(sorted.len(), lines.len());
         // Excluded verbs are not asked about.
-        let c = candidates(&w, &[12, 10, 11], &[Verb::Touch, Verb::Grab], None, &[]);
+        let c = candidates(&w, &[12, 10, 11], &[Verb::Touch, Verb::Grab], None, &[], None);
         assert!(!c.iter().any(|(l, _)| l == "TOUCH" || l == "character is HOLDS_RH to apple"));
         // A step that changes nothing is a line only where the instruction names its verb.
-        let c = candidates(&w, &[12, 10, 11], &[], Some("put the apple in the fridge"), &[]);
+        let c = candidates(&w, &[12, 10, 11], &[], Some("put the apple in the fridge"), &[], None);
         assert!(!c.iter().any(|(_, m)| matches!(m, Meaning::Verb(_))), "{c:?}");
         assert!(c.iter().any(|(l, _)| l == "apple is INSIDE to fridge"));
-        let c = candidates(&w, &[12, 10, 11], &[], None, &[]);
+        let c = candidates(&w, &[12, 10, 11], &[], None, &[], None);
         assert!(c.iter().any(|(l, _)| l == "TOUCH"), "{c:?}");
     }
 
@@ -494,7 +676,7 @@ mod tests {
     fn a_posture_the_instruction_names_leaves_out_the_others() {
         let w = World::demo();
         // The sofa (30) affords sitting and lying.
-        let lines = |t: &str| -> Vec<String> { candidates(&w, &[30], &[], Some(t), &[30]).into_iter().map(|(l, _)| l).collect() };
+        let lines = |t: &str| -> Vec<String> { candidates(&w, &[30], &[], Some(t), &[30], None).into_iter().map(|(l, _)| l).collect() };
         let sit = lines("sit on the sofa");
         assert!(sit.contains(&"character is SITTING".to_string()) && !sit.contains(&"character is LYING".to_string()), "{sit:?}");
         assert!(sit.contains(&"character is ON to sofa".to_string()), "{sit:?}");
@@ -506,12 +688,75 @@ mod tests {
     }
 
     #[test]
+    fn the_words_say_a_verb_of_the_object_that_follows_it_and_a_relation_between_two() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let of = |t: &str| Wording::of(&w, &all, t);
+        assert_eq!(of("open the fridge").said, [(10, Verb::Open)]);
+        // Phrases for verbs of other names.
+        assert_eq!(of("pick up the knife").said, [(24, Verb::Grab)]);
+        assert_eq!(of("Turn on the TV").said, [(31, Verb::SwitchOn)]);
+        assert_eq!(of("switching off the faucet").said, [(21, Verb::SwitchOff)]);
+        assert_eq!(of("Sit down on the chair").said, [(19, Verb::Sit)]);
+        // The verb's object is the next one named, with only articles and particles between.
+        assert_eq!(of("wipe the kitchen table with the rag").said, [(18, Verb::Wipe)]);
+        assert_eq!(of("open it, then take the apple").said, [(12, Verb::Grab)], "\"it\" is not an object it names");
+        assert_eq!(of("put the bread on the plate").relations, [(14, Relation::On, 17)]);
+        assert_eq!(of("put the apple into my fridge").relations, [(12, Relation::Inside, 10)]);
+        assert_eq!(of("put the book on top of the coffee table").relations, [(34, Relation::On, 33)]);
+        // A name of two words is one mention.
+        assert_eq!(of("put the remote control on the coffee table").relations, [(32, Relation::On, 33)]);
+        assert!(of("put the apple near the fridge").relations.is_empty());
+        assert!(of("take the apple from the fridge").relations.is_empty());
+    }
+
+    #[test]
+    fn what_the_words_say_leaves_out_the_lines_they_rule_out() {
+        let w = World::demo();
+        let lines = |focus: &[u32], t: &str, read: bool| -> Vec<String> {
+            let words = Wording::of(&w, focus, t);
+            candidates(&w, focus, &[], Some(t), focus, read.then_some(&words)).into_iter().map(|(l, _)| l).collect()
+        };
+        let has = |ls: &[String], l: &str| ls.iter().any(|x| x == l);
+        // The fridge (10): OPEN is said of it, so not its switch or plug.
+        let open = lines(&[10], "open the fridge", true);
+        assert!(has(&open, "fridge is OPEN") && !has(&open, "fridge is ON") && !has(&open, "fridge is PLUGGED_OUT"), "{open:?}");
+        assert!(has(&lines(&[10], "open the fridge", false), "fridge is ON"));
+        // The chair (19): sitting on it, not holding it; the robot's posture is its own line.
+        let sit = lines(&[19], "sit on the chair", true);
+        assert!(has(&sit, "character is ON to chair") && has(&sit, "character is SITTING"), "{sit:?}");
+        assert!(!sit.iter().any(|l| l.contains("HOLDS")), "{sit:?}");
+        assert!(lines(&[19], "sit on the chair", false).iter().any(|l| l.contains("HOLDS")));
+        // The bread (14) on the plate (17), not in it; the bread's other lines stay.
+        let on = lines(&[14, 17], "put the bread on the plate", true);
+        assert!(has(&on, "bread is ON to plate") && !has(&on, "bread is INSIDE to plate"), "{on:?}");
+        assert!(on.iter().any(|l| l.starts_with("character is HOLDS")), "{on:?}");
+        assert!(has(&lines(&[14, 17], "put the bread on the plate", false), "bread is INSIDE to plate"));
+        // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
+        // changes nothing the world records, so the television's switch stays a goal to set.
+        assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
+    }
+
+    #[test]
+    fn a_state_no_action_brings_about_is_not_a_line() {
+        // The demo's door (27) is open and inside the kitchen: it can be walked to and closed.
+        let w = World::demo();
+        assert!(candidates(&w, &[27], &[], None, &[], None).iter().any(|(l, _)| l == "door is CLOSED"));
+        // Without its room it cannot be reached: CLOSED is not offered, OPEN (it holds) is.
+        let mut scene: serde_json::Value = serde_json::from_str(crate::world::DEMO_KITCHEN_JSON).unwrap();
+        scene["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE"));
+        let w = World::from_json(&scene.to_string(), "no_room.json").unwrap();
+        let lines: Vec<String> = candidates(&w, &[27], &[], None, &[], None).into_iter().map(|(l, _)| l).collect();
+        assert!(!lines.contains(&"door is CLOSED".to_string()) && lines.contains(&"door is OPEN".to_string()), "{lines:?}");
+    }
+
+    #[test]
     fn where_the_instruction_names_objects_the_lines_are_about_them() {
         let w = World::demo();
         // apple (12), fridge (10), kitchencounter (11), living_room (2); the instruction names
         // the apple and the fridge, or the living room.
         let lines = |named: &[u32]| -> Vec<String> {
-            candidates(&w, &[12, 10, 11, 2], &[], None, named).into_iter().map(|(l, _)| l).collect()
+            candidates(&w, &[12, 10, 11, 2], &[], None, named, None).into_iter().map(|(l, _)| l).collect()
         };
         let named = lines(&[12, 10]);
         for l in ["apple is INSIDE to fridge", "fridge is CLOSED", "character is HOLDS_RH to apple", "character is FACING to fridge"] {
@@ -539,7 +784,7 @@ mod tests {
     #[test]
     fn a_taken_inferred_line_keeps_its_fact_or_names_its_verb() {
         let w = World::demo();
-        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[]), Vec::new());
+        let mut g = Goals::inferred(candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[], None), Vec::new(), Wording::default());
         assert!(g.kept.is_empty() && g.named_verbs.is_empty());
         g.take("fridge is CLOSED");
         g.take("TOUCH");

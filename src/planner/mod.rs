@@ -287,6 +287,10 @@ pub struct PlannerConfig {
     /// ([`goals::candidates`]), and meet a line about the robot alone on them where it can be
     /// (`toward_own_line`): the goals the root sets are congruent with its instruction.
     pub named_lines: bool,
+    /// With `infer_goals`, where the instruction says a verb of an object ("open the fridge") or
+    /// a relation between two ("the bread on the plate"), leave out that object's lines of other
+    /// verbs and the other relation (`goals::candidates`): the parent's words, plainly said.
+    pub said_lines: bool,
     /// With `infer_goals`, do not offer a line whose state holds now: a goal the root sets is a
     /// change to bring about ("fridge is CLOSED" comes back once a step has opened the fridge).
     pub skip_held_lines: bool,
@@ -342,6 +346,7 @@ impl Default for PlannerConfig {
             toward_lines: true,
             all_verb_lines: false,
             named_lines: true,
+            said_lines: true,
             skip_held_lines: true,
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
@@ -612,6 +617,7 @@ impl PlannerConfig {
             "toward_lines": self.toward_lines,
             "all_verb_lines": self.all_verb_lines,
             "named_lines": self.named_lines,
+            "said_lines": self.said_lines,
             "skip_held_lines": self.skip_held_lines,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
@@ -704,6 +710,7 @@ impl PlannerConfig {
         c.toward_lines = v.get("toward_lines").and_then(Value::as_bool).unwrap_or(false);
         c.all_verb_lines = v.get("all_verb_lines").and_then(Value::as_bool).unwrap_or(true);
         c.named_lines = v.get("named_lines").and_then(Value::as_bool).unwrap_or(false);
+        c.said_lines = v.get("said_lines").and_then(Value::as_bool).unwrap_or(false);
         c.skip_held_lines = v.get("skip_held_lines").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,

@@ -19,7 +19,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::decompose::{with_holders, Proposed};
-use super::goals::{self, Goals};
+use super::goals::{self, Goals, Wording};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter, StateLog};
 use super::rules::new_facts;
@@ -254,11 +254,13 @@ impl Run<'_> {
         }
         let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
         let about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
-        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about);
+        let wording = if self.cfg.said_lines { Wording::of(w, &focus, &instruction) } else { Wording::default() };
+        let said = self.cfg.said_lines.then_some(&wording);
+        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
         if candidates.is_empty() {
             return;
         }
-        self.goals = Goals::inferred(candidates, about);
+        self.goals = Goals::inferred(candidates, about, wording);
         self.prompter = self.prompter.clone().setting_goals();
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
     }

@@ -1396,10 +1396,32 @@ fn a_posture_line_is_taken_on_the_object_the_instruction_names() {
     let (out, _) = run(&infer, &[]);
     assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
     assert_eq!(plan_lines(&out), ["[WALK] <sofa> (30)", "[SIT] <sofa> (30)"]);
-    // Without the instruction's objects (every object's lines) both seats make the line true.
-    let (_, m) = run(&PlannerConfig { named_lines: false, ..infer.clone() }, &["subgoal: [SIT] <sofa> (30)", "done", "done"]);
+    // Without the instruction's objects (every object's lines) both seats make the line true
+    // (and without its words, which say SIT of the sofa alone: see the next test).
+    let any = PlannerConfig { named_lines: false, said_lines: false, ..infer.clone() };
+    let (_, m) = run(&any, &["subgoal: [SIT] <sofa> (30)", "done", "done"]);
     let below = m.grammars.first().expect("a call below the line");
     assert!(below.contains("<chair> (19)") && below.contains("<sofa> (30)"), "{below}");
+}
+
+/// Below a line two verbs make true ("character is ON to sofa": SIT and LIE), the step is the
+/// verb the instruction says of the object: "sit on the sofa" sits.
+#[test]
+fn a_line_is_taken_by_the_verb_the_instruction_says() {
+    let infer = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("sit on the sofa", vec![]);
+    let run = |cfg: &PlannerConfig, answers: &[&str]| {
+        let mut m = Scripted::new(answers);
+        m.preferences = ["subgoal: character is ON to sofa".to_string(), "done".to_string()].into();
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    let (out, _) = run(&infer, &[]);
+    assert_eq!(plan_lines(&out), ["[WALK] <sofa> (30)", "[SIT] <sofa> (30)"], "{:?}", out.tree.to_json());
+    // Without the words both are offered below the line.
+    let (_, m) = run(&PlannerConfig { said_lines: false, ..infer.clone() }, &["subgoal: [LIE] <sofa> (30)", "done", "done"]);
+    let below = m.grammars.first().expect("a call below the line");
+    assert!(below.contains("[SIT] ") && below.contains("[LIE] "), "{below}");
 }
 
 /// A decision's calls are one node's latency: its done check, the proposal, and what judged or

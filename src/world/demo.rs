@@ -3,8 +3,9 @@
 //!
 //! Kitchen: fridge (closed), kitchencounter with an apple, milk, bread, a knife, a rag and the
 //! microwave; a kitchencabinet (closed) holding a plate; a kitchentable with a mug; chair, sink,
-//! faucet, lightswitch and light. Living room (through an open door): sofa facing the television,
-//! a coffee_table with the remote_control and a book, a light.
+//! faucet, lightswitch and light. Living room (through an open door, inside the kitchen as a
+//! VirtualHome scene puts a door inside one of its rooms, so it can be walked to): sofa facing
+//! the television, a coffee_table with the remote_control and a book, a light.
 
 use super::graph::{self, Graph};
 use super::state::World;
