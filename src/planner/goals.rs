@@ -152,7 +152,9 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 /// `instruction` names the verb of such a line ("sit"), not of one whose verb it does not name
 /// (LYING of LIE); a named room gives the line of the robot inside it. The instruction's words
 /// are the parent the goals must be congruent with: SmolLM2 chose "food_food is CLEAN" for "Put
-/// the chessboard in the freezer".
+/// the chessboard in the freezer". With `wording`, what the words say plainly narrows the lines
+/// further ([`Wording`]). A state that neither holds nor comes of any action is never
+/// offered.
 pub fn candidates(
     w: &World,
     focus: &[u32],
@@ -276,7 +278,7 @@ impl Wording {
         let only = |between: &[String], allowed: &dyn Fn(&str) -> bool| between.iter().all(|x| allowed(x));
         let mut said: Vec<(u32, Verb)> = Vec::new();
         for k in 0..words.len() {
-            // The verbs a word names, or a phrase beginning there, and the word after it.
+            // The verbs a word names, or a phrase beginning there; the object may follow its end.
             let mut verbs: Vec<Verb> = Verb::ALL.iter().copied().filter(|&v| word_names_verb(&words[k], v)).collect();
             let mut end = k + 1;
             for (phrase, of) in VERB_PHRASES {

@@ -1379,19 +1379,23 @@ fn below_a_line_the_model_set_only_the_steps_that_make_it_true_are_offered() {
     assert!(m.grammars[0].contains("\"[PUTBACK] \""), "{}", m.grammars[0]);
 }
 
+/// "sit on the sofa" planned on the demo kitchen by a root that sets its own goals, the model
+/// preferring `line` there (then `done`) and answering `answers` below it.
+fn sit_on_the_sofa(line: &str, cfg: &PlannerConfig, answers: &[&str]) -> (PlanOutcome, Scripted) {
+    let req = PlanRequest::new("sit on the sofa", vec![]);
+    let mut m = Scripted::new(answers);
+    m.preferences = [format!("subgoal: {line}"), "done".to_string()].into();
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, cfg, &mut TraceWriter::sink());
+    (out, m)
+}
+
 /// A line about the robot alone, set for an instruction that names its object, is made true on
 /// that object: "character is SITTING" for "sit on the sofa" by sitting on the sofa (30), though
 /// the demo's chair (19) would make it true too.
 #[test]
 fn a_posture_line_is_taken_on_the_object_the_instruction_names() {
     let infer = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let req = PlanRequest::new("sit on the sofa", vec![]);
-    let run = |cfg: &PlannerConfig, answers: &[&str]| {
-        let mut m = Scripted::new(answers);
-        m.preferences = ["subgoal: character is SITTING".to_string(), "done".to_string()].into();
-        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, cfg, &mut TraceWriter::sink());
-        (out, m)
-    };
+    let run = |cfg: &PlannerConfig, answers: &[&str]| sit_on_the_sofa("character is SITTING", cfg, answers);
     // With the rule the one sitting step left is on the sofa: no model is asked below the line.
     let (out, _) = run(&infer, &[]);
     assert_eq!(out.stop, StopCause::Done, "{:?}", out.tree.to_json());
@@ -1409,13 +1413,7 @@ fn a_posture_line_is_taken_on_the_object_the_instruction_names() {
 #[test]
 fn a_line_is_taken_by_the_verb_the_instruction_says() {
     let infer = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let req = PlanRequest::new("sit on the sofa", vec![]);
-    let run = |cfg: &PlannerConfig, answers: &[&str]| {
-        let mut m = Scripted::new(answers);
-        m.preferences = ["subgoal: character is ON to sofa".to_string(), "done".to_string()].into();
-        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, cfg, &mut TraceWriter::sink());
-        (out, m)
-    };
+    let run = |cfg: &PlannerConfig, answers: &[&str]| sit_on_the_sofa("character is ON to sofa", cfg, answers);
     let (out, _) = run(&infer, &[]);
     assert_eq!(plan_lines(&out), ["[WALK] <sofa> (30)", "[SIT] <sofa> (30)"], "{:?}", out.tree.to_json());
     // Without the words both are offered below the line.
