@@ -164,9 +164,12 @@ impl Run<'_> {
         // A root shown goal lines is decomposed into them: it is not done while one is left to take.
         // A root choosing its own goal lines (`infer_goals`) is done when the model says so, once
         // it has taken one.
+        // (nor while a thing its instruction's words say is offered and none of its lines taken:
+        // "put the apple in the fridge and close it")
         let inferring = offered && self.goals.inferred;
+        let unsaid = |g: &Vec<String>| !g.iter().any(|l| st.tried.contains(l)) && g.iter().any(|l| subgoal_menu.contains(l));
         let allow_done = if inferring {
-            !st.tried.is_empty()
+            !st.tried.is_empty() && !self.goals.said.iter().any(unsaid)
         } else {
             !(target.is_some() && self.cfg.target_steps)
                 && !(offered && allow_subgoal)

@@ -44,6 +44,9 @@ pub struct Goals {
     pub named_objects: Vec<u32>,
     /// For inferred lines, what the instruction says of them ([`Wording`]; empty when not read).
     pub wording: Wording,
+    /// For inferred lines, the things the words say, each a group of lines, one of which the
+    /// root takes before it may be done ([`Wording::keep_said`]).
+    pub said: Vec<Vec<String>>,
 }
 
 impl Goals {
@@ -57,6 +60,7 @@ impl Goals {
             named_verbs: req.named_verbs.clone(),
             named_objects: Vec::new(),
             wording: Wording::default(),
+            said: Vec::new(),
         }
     }
 
@@ -69,7 +73,7 @@ impl Goals {
     /// Candidate lines for the model to choose among (see [`candidates`]); nothing is kept yet.
     pub fn inferred(candidates: Vec<(String, Meaning)>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings) = candidates.into_iter().unzip();
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said: Vec::new() }
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -163,6 +167,19 @@ pub fn candidates(
     named: &[u32],
     wording: Option<&Wording>,
 ) -> Vec<(String, Meaning)> {
+    candidates_and_said(w, focus, excluded, instruction, named, wording).0
+}
+
+/// [`candidates`], and what the words say among them as groups of lines ([`Wording::keep_said`];
+/// none without `wording`).
+pub fn candidates_and_said(
+    w: &World,
+    focus: &[u32],
+    excluded: &[Verb],
+    instruction: Option<&str>,
+    named: &[u32],
+    wording: Option<&Wording>,
+) -> (Vec<(String, Meaning)>, Vec<Vec<String>>) {
     let robot = w.character();
     let objects: Vec<u32> = focus
         .iter()
@@ -251,10 +268,8 @@ pub fn candidates(
     // A state that does not hold and that no action brings about (a door in no room cannot be
     // walked to and closed) is not a goal a plan can meet.
     out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::State { .. }) if !w.holds(f) && !made_by.iter().any(|(ml, _)| ml == l)));
-    if let Some(words) = wording {
-        words.keep_said(robot, &made_by, &mut out);
-    }
-    out
+    let said = wording.map(|words| words.keep_said(robot, &made_by, &mut out)).unwrap_or_default();
+    (out, said)
 }
 
 /// What an instruction says plainly of the objects it names, read from its words: the parent
@@ -268,15 +283,36 @@ pub struct Wording {
     pub said: Vec<(u32, Verb)>,
     /// "A in B", "A on B" (only articles between): A's relation to B.
     pub relations: Vec<(u32, Relation, u32)>,
+    /// `said` as the words say it, one entry a verb and the object it is said of ("the table"
+    /// may name two tables: one of them is meant).
+    said_once: Vec<Vec<(u32, Verb)>>,
+    /// `relations` the same way.
+    relations_once: Vec<Vec<(u32, Relation, u32)>>,
 }
 
 impl Wording {
     /// Reads `text` over the objects of `focus` ([`instruction_objects`]' names).
     pub fn of(w: &World, focus: &[u32], text: &str) -> Wording {
         let words = words_of(text);
-        let found = mentions(w, focus, text);
+        // A word that says a verb is not also an object ("switch" ends "lightswitch").
+        let verb_word = |x: &String| {
+            Verb::ALL.iter().any(|&v| word_names_verb(x, v)) || VERB_PHRASES.iter().any(|(p, _)| p[0] == x.as_str())
+        };
+        let mut found = mentions(w, focus, text);
+        found.retain(|(k, end, _)| !(*end == k + 1 && verb_word(&words[*k])));
+        // "it" and "them" are what was named last ("put it in the dresser, then close it").
+        for (k, word) in words.iter().enumerate() {
+            if !["it", "them"].contains(&word.as_str()) {
+                continue;
+            }
+            if let Some((_, _, ids)) = found.iter().filter(|(_, end, _)| *end <= k).max_by_key(|(_, end, _)| *end) {
+                found.push((k, k + 1, ids.clone()));
+            }
+        }
+        found.sort_by_key(|(k, _, _)| *k);
         let only = |between: &[String], allowed: &dyn Fn(&str) -> bool| between.iter().all(|x| allowed(x));
         let mut said: Vec<(u32, Verb)> = Vec::new();
+        let mut said_once: Vec<Vec<(u32, Verb)>> = Vec::new();
         for k in 0..words.len() {
             // The verbs a word names, or a phrase beginning there; the object may follow its end.
             let mut verbs: Vec<Verb> = Verb::ALL.iter().copied().filter(|&v| word_names_verb(&words[k], v)).collect();
@@ -288,15 +324,25 @@ impl Wording {
                     end = end.max(k + phrase.len());
                 }
             }
-            let Some((j, _, ids)) = found.iter().find(|(j, _, _)| *j >= end) else { continue };
+            let Some((j, after, ids)) = found.iter().find(|(j, _, _)| *j >= end) else { continue };
+            // A phrase whose particle comes after the object ("switch it on", "turn the TV off").
+            for (phrase, of) in VERB_PHRASES.iter().filter(|(p, _)| p.len() == 2 && PARTICLES.contains(&p[1])) {
+                let first = words[k] == phrase[0] || (phrase[0].len() >= 4 && words[k].starts_with(phrase[0]));
+                let split = words.get(*after).is_some_and(|x| x == phrase[1]);
+                if first && split && only(&words[k + 1..*j], &|x| DETERMINERS.contains(&x)) {
+                    verbs.extend(of.iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
+                }
+            }
             if verbs.is_empty() || !only(&words[end..*j], &|x| DETERMINERS.contains(&x) || PARTICLES.contains(&x)) {
                 continue;
             }
             for &id in ids {
                 said.extend(verbs.iter().map(|&v| (id, v)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
             }
+            said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
         }
         let mut relations = Vec::new();
+        let mut relations_once = Vec::new();
         for pair in found.windows(2) {
             let ((_, i, a), (j, _, b)) = (&pair[0], &pair[1]);
             let between = &words[*i..*j];
@@ -311,9 +357,11 @@ impl Wording {
             } else {
                 continue;
             };
-            relations.extend(a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))));
+            let pairs: Vec<(u32, Relation, u32)> = a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))).collect();
+            relations.extend(pairs.iter().copied());
+            relations_once.push(pairs);
         }
-        Wording { said, relations }
+        Wording { said, relations, said_once, relations_once }
     }
 
     /// The verbs said of `id`.
@@ -328,7 +376,12 @@ impl Wording {
     ///
     /// `made_by` is every fact line with a verb that brings it about; a state line is also of the
     /// verb that sets that state (SWITCHON for ON).
-    fn keep_said(&self, robot: u32, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) {
+    ///
+    /// Returns what is said, as groups of lines left in `out`, one group a thing said: the lines
+    /// of one verb said of one object (HOLDS_RH and HOLDS_LH for "pick up the phone"), or the
+    /// relation said. Of two opposite verbs said of one object ("open the fridge, …, close it"),
+    /// only the later is a group: the words end there.
+    fn keep_said(&self, robot: u32, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> Vec<Vec<String>> {
         let verbs_of_line = |line: &str, m: &Meaning| -> Vec<Verb> {
             let mut v: Vec<Verb> = made_by.iter().filter(|(l, _)| l == line).map(|(_, v)| *v).collect();
             if let Meaning::Fact(Fact::State { state, .. }) = m {
@@ -356,7 +409,39 @@ impl Wording {
                 out.retain(|(_, m)| *m != edge(other));
             }
         }
+        let mut groups: Vec<Vec<String>> = Vec::new();
+        let mut add = |lines: Vec<String>| {
+            if !lines.is_empty() && !groups.contains(&lines) {
+                groups.push(lines);
+            }
+        };
+        for (i, once) in self.said_once.iter().enumerate() {
+            let later = |x: u32, v: Verb| opposite_verb(v).is_some_and(|o| self.said_once[i + 1..].iter().flatten().any(|p| *p == (x, o)));
+            if once.iter().any(|&(x, v)| later(x, v)) {
+                continue;
+            }
+            let of = |(l, m): &&(String, Meaning)| once.iter().any(|&(x, v)| alone_on(m, x) && verbs_of_line(l, m).contains(&v));
+            add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
+        }
+        for once in &self.relations_once {
+            let said = |m: &Meaning| once.iter().any(|&(from, relation, to)| *m == Meaning::Fact(Fact::Edge { from, relation, to }));
+            add(out.iter().filter(|(_, m)| said(m)).map(|(l, _)| l.clone()).collect());
+        }
+        groups
     }
+}
+
+/// The verb that undoes what `v` does, for the verbs of the two-state pairs.
+fn opposite_verb(v: Verb) -> Option<Verb> {
+    Some(match v {
+        Verb::Open => Verb::Close,
+        Verb::Close => Verb::Open,
+        Verb::SwitchOn => Verb::SwitchOff,
+        Verb::SwitchOff => Verb::SwitchOn,
+        Verb::PlugIn => Verb::PlugOut,
+        Verb::PlugOut => Verb::PlugIn,
+        _ => return None,
+    })
 }
 
 /// The verb that sets `state`, for the states a goal line may ask of an object's switch, door or
@@ -699,6 +784,11 @@ mod tests {
         assert_eq!(of("pick up the knife").said, [(24, Verb::Grab)]);
         assert_eq!(of("Turn on the TV").said, [(31, Verb::SwitchOn)]);
         assert_eq!(of("switching off the faucet").said, [(21, Verb::SwitchOff)]);
+        assert_eq!(of("turn the TV on").said, [(31, Verb::SwitchOn)]);
+        // "it" is what was named last; "switch" is a verb here, not the lightswitch.
+        assert_eq!(of("I walk to the faucet and switch it on").said, [(21, Verb::Walk), (21, Verb::SwitchOn)]);
+        assert_eq!(of("put the apple in the fridge, then close it").said, [(10, Verb::Close)]);
+        assert_eq!(of("take the apple and put it in the fridge").relations, [(12, Relation::Inside, 10)]);
         assert_eq!(of("Sit down on the chair").said, [(19, Verb::Sit)]);
         // The verb's object is the next one named, with only articles and particles between.
         assert_eq!(of("wipe the kitchen table with the rag").said, [(18, Verb::Wipe)]);
@@ -737,6 +827,24 @@ mod tests {
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
+    }
+
+    #[test]
+    fn what_is_said_is_grouped_by_what_the_words_name_once() {
+        let w = World::demo();
+        let said = |focus: &[u32], t: &str| {
+            let words = Wording::of(&w, focus, t);
+            candidates_and_said(&w, focus, &[], Some(t), focus, Some(&words)).1
+        };
+        // "the table" names the kitchentable (18) and the coffee_table (33): one of them is meant
+        // (the plate is in the kitchencabinet, 16).
+        let on = said(&[16, 17, 18, 33], "put the plate on the table");
+        assert_eq!(on, [vec!["plate is ON to kitchentable".to_string(), "plate is ON to coffee_table".to_string()]], "{on:?}");
+        // GRAB's two hands are one thing said.
+        assert_eq!(said(&[24], "pick up the knife").len(), 1);
+        // Of OPEN and then CLOSE said of the fridge, the words end closed.
+        let fridge = said(&[10, 12], "open the fridge, put the apple in the fridge and close the fridge");
+        assert_eq!(fridge, [vec!["fridge is CLOSED".to_string()], vec!["apple is INSIDE to fridge".to_string()]], "{fridge:?}");
     }
 
     #[test]

@@ -256,11 +256,12 @@ impl Run<'_> {
         let about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
         let wording = if self.cfg.said_lines { Wording::of(w, &focus, &instruction) } else { Wording::default() };
         let said = self.cfg.said_lines.then_some(&wording);
-        let candidates = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
+        let (candidates, said) = goals::candidates_and_said(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
         if candidates.is_empty() {
             return;
         }
         self.goals = Goals::inferred(candidates, about, wording);
+        self.goals.said = said;
         self.prompter = self.prompter.clone().setting_goals();
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
     }

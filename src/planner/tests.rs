@@ -1238,7 +1238,8 @@ fn with_infer_goals_the_root_sets_its_own_goal_lines_then_says_done() {
     m.preferences = [format!("subgoal: {open}"), "done".to_string()].into();
     let mut env = SimEnv::new(World::demo(), vec![]);
     // (every step offered below the line, so that the model decides there)
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, toward_lines: false, ..defaults() };
+    // (and the words not read: they say the apple's line, which would have to be taken first)
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, toward_lines: false, said_lines: false, ..defaults() };
     let req = PlanRequest::new("put the apple in the fridge", vec![]);
     let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
@@ -1277,6 +1278,31 @@ fn a_goal_line_that_already_holds_says_so_in_its_status() {
     assert!(out.executed.is_empty() && out.tree.node(1).text == "fridge is CLOSED", "{:?}", out.tree.to_json());
     let (status, why) = out.tree.node(1).history.last().unwrap();
     assert_eq!((status.as_str(), why.as_str()), ("executed", "it already held: nothing to do"));
+}
+
+/// A thing the instruction's words say is a line the root takes before it may say `done`:
+/// "…and close it" closes the fridge, though the model would stop after the apple's line.
+#[test]
+fn the_root_takes_what_the_words_say_before_it_is_done() {
+    let closed = "subgoal: fridge is CLOSED".to_string();
+    // The apple's line first, then `second`, then `done`.
+    let go = |said_lines: bool, second: &str| {
+        let mut m = Scripted::new(&[]);
+        m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}"), second.to_string(), "done".to_string()].into();
+        let cfg = PlannerConfig { infer_goals: true, said_lines, lines_done_at: None, ..defaults() };
+        let req = PlanRequest::new("put the apple in the fridge and close it", vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+        (out, m)
+    };
+    // Back at the root after the apple's line, `done` is not offered while the fridge's is.
+    let (out, m) = go(true, &closed);
+    assert!(m.scored[1].contains(&closed) && !m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[CLOSE] <fridge> (10)"), "{:?}", out.tree.to_json());
+    assert_eq!(out.stop, StopCause::Done);
+    // Without the words the model's `done` there ends the root with the fridge open.
+    let (out, m) = go(false, "done");
+    assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"));
 }
 
 #[test]
