@@ -237,6 +237,10 @@ pub struct DecisionArgs {
     /// Where the root sets goal lines: offer lines whose state already holds too.
     #[arg(long)]
     pub offer_held_lines: bool,
+    /// Where the root sets goal lines: choose by how much more likely the instruction makes each
+    /// answer (its log probability less that under the prompt without the instruction).
+    #[arg(long)]
+    pub calibrate_lines: bool,
 }
 
 /// A probability in (0, 1] (`--done-at`): 0 would stop everywhere, above 1 nowhere (say
@@ -274,5 +278,6 @@ impl DecisionArgs {
         cfg.named_lines = !self.any_object_lines;
         cfg.said_lines = !self.unsaid_lines;
         cfg.skip_held_lines = !self.offer_held_lines;
+        cfg.calibrate_lines = self.calibrate_lines;
     }
 }

@@ -213,7 +213,8 @@ impl Run<'_> {
                 None => return Ok(Proposed::Nothing),
             }
         } else if menu.whole {
-            self.likeliest(node, &prompt, dg)?
+            let uninstructed = self.uninstructed.as_ref().map(|p| p.decompose(view));
+            self.likeliest(node, &prompt, uninstructed.as_ref(), dg)?
         } else if dg.allow_done && self.done_check(node, &prompt, dg.allow_subgoal, menu.done_at)? {
             "done".to_string()
         } else {
@@ -375,19 +376,10 @@ impl Run<'_> {
                 let named = &self.goals.named_objects;
                 let on_named = |a: &&Action| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id));
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
-                let making = if alone && making.iter().any(|a| on_named(&a)) {
-                    making.into_iter().filter(|a| on_named(&a)).collect()
-                } else {
-                    making
-                };
+                let making = if alone { narrowed(making, on_named) } else { making };
                 // And by a verb the instruction says of the object, where one does it ("sit on
                 // the sofa": SIT, not LIE, for "character is ON to sofa").
-                let said = |a: &&Action| a.args.first().is_some_and(|o| self.goals.wording.verbs_of(o.id).contains(&a.verb));
-                if making.iter().any(|a| said(&a)) {
-                    making.into_iter().filter(|a| said(&a)).collect()
-                } else {
-                    making
-                }
+                narrowed(making, |a| a.args.first().is_some_and(|o| self.goals.wording.verbs_of(o.id).contains(&a.verb)))
             }
             None => {
                 let verbs = goals::line_verbs(text);
@@ -432,13 +424,21 @@ impl Run<'_> {
     /// scored as the complete answer and the highest total log probability wins (the first on a
     /// tie). Greedy decoding commits to the first token alone: a tiny model that copies the
     /// menu's lines one after another never wrote `done` there, where the whole answers' odds
-    /// compare `done` with each line as a whole.
-    fn likeliest(&mut self, node: NodeId, prompt: &Prompt, dg: &DecomposeGrammar) -> Result<String, StopCause> {
+    /// compare `done` with each line as a whole. With `uninstructed` (the same prompt without the
+    /// instruction), each score is less the answer's score there (`PlannerConfig::calibrate_lines`).
+    fn likeliest(&mut self, node: NodeId, prompt: &Prompt, uninstructed: Option<&Prompt>, dg: &DecomposeGrammar) -> Result<String, StopCause> {
         let mut answers: Vec<String> = dg.subgoal_menu.iter().map(|l| format!("subgoal: {l}")).collect();
         if dg.allow_done {
             answers.push("done".to_string());
         }
-        let best = self.best_scored("choose", node, prompt, &answers, |s| s.logprob, json!({"whole": true}))?;
+        let prior = match uninstructed {
+            Some(p) => {
+                let likeliest = |s: &[Score]| (0..s.len()).fold(0, |best, i| if s[i].logprob > s[best].logprob { i } else { best });
+                Some(self.scores("calibrate", node, p, &answers, likeliest)?.0.iter().map(|s| s.logprob).collect::<Vec<f64>>())
+            }
+            None => None,
+        };
+        let best = self.best_scored("choose", node, prompt, &answers, |s| s.logprob, prior.as_deref(), json!({"whole": true}))?;
         Ok(answers.swap_remove(best))
     }
 
@@ -451,13 +451,15 @@ impl Run<'_> {
             return Ok(written);
         }
         let lines: Vec<String> = list.iter().map(|a| format!("action: {a}")).collect();
-        let best = self.best_scored("score", node, prompt, &lines, Score::mean, json!({"written": format!("action: {written}")}))?;
+        let best = self.best_scored("score", node, prompt, &lines, Score::mean, None, json!({"written": format!("action: {written}")}))?;
         Ok(list[best].clone())
     }
 
-    /// One scoring call over `answers`: the index of the best by `key` (the first on a tie),
-    /// recorded as a call of `role` and traced with the top five (and `fields`). `choose`: the
-    /// scores are the decision itself; `score`: they rank what a decomposition call wrote.
+    /// One scoring call over `answers`: the index of the best by `key` less its `prior` (the
+    /// first on a tie), recorded as a call of `role` and traced with the top five (and `fields`).
+    /// `choose`: the scores are the decision itself; `score`: they rank what a decomposition call
+    /// wrote.
+    #[allow(clippy::too_many_arguments)]
     fn best_scored(
         &mut self,
         role: &'static str,
@@ -465,8 +467,30 @@ impl Run<'_> {
         prompt: &Prompt,
         answers: &[String],
         key: fn(&Score) -> f64,
+        prior: Option<&[f64]>,
         mut fields: serde_json::Value,
     ) -> Result<usize, StopCause> {
+        let value = |scores: &[Score], i: usize| key(&scores[i]) - prior.map_or(0.0, |p| p[i]);
+        let best_of = |scores: &[Score]| (0..scores.len()).fold(0, |best, i| if value(scores, i) > value(scores, best) { i } else { best });
+        let (scores, best) = self.scores(role, node, prompt, answers, best_of)?;
+        let mut top: Vec<(f64, &str)> = (0..scores.len()).map(|i| value(&scores, i)).zip(answers.iter().map(String::as_str)).collect();
+        top.sort_by(|a, b| b.0.total_cmp(&a.0));
+        fields["node"] = json!(node);
+        fields["top"] = top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect();
+        self.trace.event("scores", fields);
+        Ok(best)
+    }
+
+    /// One scoring call over `answers`: the scores and the index `pick` chooses among them,
+    /// recorded as a call of `role` whose output is that answer.
+    fn scores(
+        &mut self,
+        role: &'static str,
+        node: NodeId,
+        prompt: &Prompt,
+        answers: &[String],
+        pick: impl Fn(&[Score]) -> usize,
+    ) -> Result<(Vec<Score>, usize), StopCause> {
         self.check_global()?;
         let hash = prompt_hash(prompt, &answers.join("\n"));
         super::planner::log_prompt(role, node, prompt);
@@ -478,19 +502,9 @@ impl Run<'_> {
         })?;
         let total_ms = t.elapsed().as_secs_f64() * 1e3;
         self.stats.llm_calls += 1;
-        let mut best = 0;
-        for (i, s) in scoring.scores.iter().enumerate() {
-            if key(s) > key(&scoring.scores[best]) {
-                best = i;
-            }
-        }
+        let best = pick(&scoring.scores);
         self.record(CallRecord::of_scoring(role, node, hash, &scoring, &answers[best], total_ms));
-        let mut top: Vec<(f64, &str)> = scoring.scores.iter().map(key).zip(answers.iter().map(String::as_str)).collect();
-        top.sort_by(|a, b| b.0.total_cmp(&a.0));
-        fields["node"] = json!(node);
-        fields["top"] = top.iter().take(5).map(|(s, l)| json!([l, (s * 1000.0).round() / 1000.0])).collect();
-        self.trace.event("scores", fields);
-        Ok(best)
+        Ok((scoring.scores, best))
     }
 
     /// The options of a decision with their effects (see `PlannerConfig::show_effects`): each
@@ -588,3 +602,13 @@ pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
 
 /// The most steps [`Run::effects_menu`] shows (a prompt's tail stays a few hundred tokens).
 const MAX_SHOWN_STEPS: usize = 24;
+
+/// The actions of `list` that pass `keep`, where any does; else `list` whole: a preference among
+/// ways, never a reason to have none.
+fn narrowed(list: Vec<Action>, keep: impl Fn(&&Action) -> bool) -> Vec<Action> {
+    if list.iter().any(|a| keep(&a)) {
+        list.into_iter().filter(|a| keep(&a)).collect()
+    } else {
+        list
+    }
+}

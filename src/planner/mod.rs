@@ -294,6 +294,11 @@ pub struct PlannerConfig {
     /// With `infer_goals`, do not offer a line whose state holds now: a goal the root sets is a
     /// change to bring about ("fridge is CLOSED" comes back once a step has opened the fridge).
     pub skip_held_lines: bool,
+    /// With `infer_goals`, the root chooses its line by how much more likely the instruction
+    /// makes it: each answer's log probability less its log probability under the same prompt
+    /// with the instruction left out (pointwise mutual information), so that a short or
+    /// familiar answer (`done`, the menu's first line) does not win on its form alone.
+    pub calibrate_lines: bool,
     /// How a proposed action is chosen once the model has said it proposes one.
     pub choose: ActionChoice,
     /// Verbs no grammar offers (e.g. those EAI's scorer cannot execute, on EAI's tasks).
@@ -348,6 +353,7 @@ impl Default for PlannerConfig {
             named_lines: true,
             said_lines: true,
             skip_held_lines: true,
+            calibrate_lines: false,
             choose: ActionChoice::Generate,
             excluded_verbs: Vec::new(),
             observe_budget: 600,
@@ -619,6 +625,7 @@ impl PlannerConfig {
             "named_lines": self.named_lines,
             "said_lines": self.said_lines,
             "skip_held_lines": self.skip_held_lines,
+            "calibrate_lines": self.calibrate_lines,
             "choose": self.choose.name(),
             "excluded_verbs": self.excluded_verbs.iter().map(|v| v.name()).collect::<Vec<_>>(),
             "observe_budget": self.observe_budget,
@@ -712,6 +719,7 @@ impl PlannerConfig {
         c.named_lines = v.get("named_lines").and_then(Value::as_bool).unwrap_or(false);
         c.said_lines = v.get("said_lines").and_then(Value::as_bool).unwrap_or(false);
         c.skip_held_lines = v.get("skip_held_lines").and_then(Value::as_bool).unwrap_or(false);
+        c.calibrate_lines = v.get("calibrate_lines").and_then(Value::as_bool).unwrap_or(false);
         c.choose = match v.get("choose").and_then(Value::as_str) {
             None => ActionChoice::Generate,
             Some(s) => s.parse()?,

@@ -125,6 +125,8 @@ pub(crate) struct Run<'a> {
     pub(super) trace: &'a mut TraceWriter,
     pub(super) mode: ContextMode,
     pub(super) prompter: Prompter,
+    /// The prompts without the instruction, where the root's lines are calibrated against them.
+    pub(super) uninstructed: Option<Prompter>,
     pub(super) focus: Vec<u32>,
     pub(super) tree: SubgoalTree,
     pub(super) stats: PlanStats,
@@ -190,6 +192,7 @@ pub(crate) fn run_tree(
         trace,
         mode: ContextMode::of(cfg.kind),
         prompter: Prompter::new(&req.instruction, req.context.as_deref(), &start_state),
+        uninstructed: None,
         focus,
         tree: SubgoalTree::new(&req.instruction),
         stats: PlanStats::default(),
@@ -256,13 +259,13 @@ impl Run<'_> {
         let about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
         let wording = if self.cfg.said_lines { Wording::of(w, &focus, &instruction) } else { Wording::default() };
         let said = self.cfg.said_lines.then_some(&wording);
-        let (candidates, said) = goals::candidates_and_said(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
+        let (candidates, said) = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
         if candidates.is_empty() {
             return;
         }
-        self.goals = Goals::inferred(candidates, about, wording);
-        self.goals.said = said;
+        self.goals = Goals::inferred(w, candidates, said, about, wording);
         self.prompter = self.prompter.clone().setting_goals();
+        self.uninstructed = self.cfg.calibrate_lines.then(|| self.prompter.without_instruction());
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
     }
 

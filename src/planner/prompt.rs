@@ -92,6 +92,13 @@ impl Prompter {
         self
     }
 
+    /// The same prompts with the instruction left out (its line says none is given): the
+    /// baseline `PlannerConfig::calibrate_lines` scores answers against.
+    pub fn without_instruction(&self) -> Prompter {
+        let rest = self.task.split_once('\n').map_or("", |(_, rest)| rest);
+        Prompter { system: self.system.clone(), task: format!("Task: (none)\n{rest}") }
+    }
+
     /// The beginning every prompt of the run shares: the system message (the engine cuts it where
     /// the user turn's text begins, and may keep it on disk between runs).
     pub fn prefix(&self) -> Vec<Message> {

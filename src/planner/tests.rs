@@ -1282,17 +1282,22 @@ fn a_goal_line_that_already_holds_says_so_in_its_status() {
 
 /// A thing the instruction's words say is a line the root takes before it may say `done`:
 /// "…and close it" closes the fridge, though the model would stop after the apple's line.
+/// The root of `instruction` (goals inferred, with or without the words' rule) takes `first`,
+/// then `second`, then `done`, where offered; `script` is what the model writes below them.
+fn first_then(instruction: &str, script: &[&str], said_lines: bool, first: &str, second: &str) -> (PlanOutcome, Scripted) {
+    let mut m = Scripted::new(script);
+    m.preferences = [first.to_string(), second.to_string(), "done".to_string()].into();
+    let cfg = PlannerConfig { infer_goals: true, said_lines, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new(instruction, vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    (out, m)
+}
+
 #[test]
 fn the_root_takes_what_the_words_say_before_it_is_done() {
     let closed = "subgoal: fridge is CLOSED".to_string();
-    // The apple's line first, then `second`, then `done`.
     let go = |said_lines: bool, second: &str| {
-        let mut m = Scripted::new(&[]);
-        m.preferences = [format!("subgoal: {APPLE_IN_FRIDGE}"), second.to_string(), "done".to_string()].into();
-        let cfg = PlannerConfig { infer_goals: true, said_lines, lines_done_at: None, ..defaults() };
-        let req = PlanRequest::new("put the apple in the fridge and close it", vec![]);
-        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
-        (out, m)
+        first_then("put the apple in the fridge and close it", &[], said_lines, &format!("subgoal: {APPLE_IN_FRIDGE}"), second)
     };
     // Back at the root after the apple's line, `done` is not offered while the fridge's is.
     let (out, m) = go(true, &closed);
@@ -1303,6 +1308,77 @@ fn the_root_takes_what_the_words_say_before_it_is_done() {
     let (out, m) = go(false, "done");
     assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
     assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"));
+}
+
+#[test]
+fn the_root_does_what_a_verb_word_says_before_it_is_done() {
+    // DRINK changes nothing the world records: its line is what "drink" says, whatever follows.
+    let drink = "subgoal: DRINK".to_string();
+    // (below the DRINK line the model writes the step: the milk or another drink)
+    let go = |said_lines: bool, second: &str| {
+        first_then("drink the milk", &["action: [DRINK] <milk> (13)"], said_lines, "subgoal: character is HOLDS_RH to milk", second)
+    };
+    // Back at the root holding the milk, `done` is not offered while DRINK is.
+    let (out, m) = go(true, &drink);
+    assert!(m.scored[1].contains(&drink) && !m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[DRINK] <milk> (13)"), "{:?}", out.tree.to_json());
+    assert_eq!(out.stop, StopCause::Done);
+    // Without the words the model's `done` there ends the root with the milk not drunk.
+    let (out, m) = go(false, "done");
+    assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[GRAB] <milk> (13)"), "{:?}", out.tree.to_json());
+}
+
+/// Scores each answer from a table, one for prompts that give the instruction and one for those
+/// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
+struct TwoTables {
+    with: Vec<(String, f64)>,
+    without: Vec<(String, f64)>,
+    calls_without: usize,
+}
+
+impl Generate for TwoTables {
+    fn generate(&mut self, prompt: &Prompt, _: Option<&str>, _: &GenOptions) -> crate::llm::Result<Generation> {
+        panic!("no generation expected; prompt:\n{}", prompt_text(prompt))
+    }
+
+    fn score(&mut self, prompt: &Prompt, continuations: &[String]) -> crate::llm::Result<crate::llm::engine::Scoring> {
+        let without = prompt_text(prompt).contains("Task: (none)");
+        self.calls_without += usize::from(without);
+        let (table, rest) = if without { (&self.without, -5.0) } else { (&self.with, -10.0) };
+        let of = |c: &String| table.iter().find(|(a, _)| a == c).map_or(rest, |(_, s)| *s);
+        let scores = continuations.iter().map(|c| crate::llm::engine::Score { logprob: of(c), tokens: 3 }).collect();
+        Ok(crate::llm::engine::Scoring { scores, prompt_tokens: 100, reused_tokens: 90, run_tokens: 3, ms: 1.0 })
+    }
+}
+
+#[test]
+fn calibrated_lines_are_chosen_by_what_the_instruction_adds() {
+    let apple = format!("subgoal: {APPLE_IN_FRIDGE}");
+    let open = "subgoal: fridge is OPEN".to_string();
+    let go = |calibrate_lines: bool| {
+        // The fridge open is likelier as an answer, but as likely without the instruction;
+        // the apple in the fridge is what the instruction makes likely. `done` is as likely
+        // either way.
+        let mut m = TwoTables {
+            with: vec![(open.clone(), -2.0), (apple.clone(), -3.0), ("done".to_string(), -1.0)],
+            without: vec![(open.clone(), -2.0), (apple.clone(), -8.0), ("done".to_string(), -1.0)],
+            calls_without: 0,
+        };
+        // (without the words' rule, so `done` may follow any first line)
+        let cfg = PlannerConfig { infer_goals: true, said_lines: false, calibrate_lines, lines_done_at: None, ..defaults() };
+        let req = PlanRequest::new("put the apple in the fridge", vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+        (out, m.calls_without)
+    };
+    let (out, calls) = go(true);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"), "{:?}", out.tree.to_json());
+    assert_eq!(out.stop, StopCause::Done);
+    assert_eq!(calls, 2, "one baseline for each of the root's two choices");
+    // By raw likelihood the root opens the fridge and is done.
+    let (out, calls) = go(false);
+    assert_eq!(plan_lines(&out), ["[WALK] <fridge> (10)", "[OPEN] <fridge> (10)"], "{:?}", out.tree.to_json());
+    assert_eq!(calls, 0);
 }
 
 #[test]
