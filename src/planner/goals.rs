@@ -403,8 +403,8 @@ impl Wording {
     /// relation said, or the action lines of the verbs one word names ("Drink water": DRINK;
     /// "clean": any of WASH, SCRUB, WIPE, RINSE; such a line is offered only where the words name
     /// its verb, and nothing else asks for it) with the posture they put the robot in ("lie
-    /// down": LYING). Of two opposite verbs said of one object ("open
-    /// the fridge, …, close it"), only the later is a group: the words end there.
+    /// down": LYING). Of two opposite verbs said of one object ("open the fridge, …, close it"),
+    /// only the later is a group: the words end there.
     fn keep_said(&self, robot: u32, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> Vec<Vec<String>> {
         let verbs_of_line = |line: &str, m: &Meaning| -> Vec<Verb> {
             let mut v: Vec<Verb> = made_by.iter().filter(|(l, _)| l == line).map(|(_, v)| *v).collect();
