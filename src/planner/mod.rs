@@ -480,12 +480,14 @@ impl CallRecord {
 
     /// Whether this call begins a new decision, after a call of role `previous`: a decision is a
     /// done check (where `done` may be answered), the call that proposes a node (a decomposition,
-    /// or `choose`: the likeliest of whole answers, as the root sets its goal lines), and the calls
-    /// that judge or score the proposal. Latency "per node" is per decision.
+    /// or `choose`: the likeliest of whole answers, as the root sets its goal lines, after its
+    /// `calibrate` baseline where there is one), and the calls that judge or score the proposal.
+    /// Latency "per node" is per decision.
     pub fn starts_decision(&self, previous: Option<&str>) -> bool {
         match self.role {
             "done_check" => true,
-            "decompose" | "flat" | "choose" => previous != Some("done_check"),
+            "calibrate" | "decompose" | "flat" => previous != Some("done_check"),
+            "choose" => !matches!(previous, Some("done_check" | "calibrate")),
             _ => previous.is_none(),
         }
     }

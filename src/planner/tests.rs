@@ -1375,6 +1375,10 @@ fn calibrated_lines_are_chosen_by_what_the_instruction_adds() {
     assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"), "{:?}", out.tree.to_json());
     assert_eq!(out.stop, StopCause::Done);
     assert_eq!(calls, 2, "one baseline for each of the root's two choices");
+    // A baseline and its choice are one decision, for latency per node.
+    let roles: Vec<&str> = out.stats.calls.iter().map(|c| c.role).collect();
+    assert_eq!(roles, ["calibrate", "choose", "calibrate", "choose"]);
+    assert_eq!(CallRecord::decisions(&out.stats.calls).len(), 2);
     // By raw likelihood the root opens the fridge and is done.
     let (out, calls) = go(false);
     assert_eq!(plan_lines(&out), ["[WALK] <fridge> (10)", "[OPEN] <fridge> (10)"], "{:?}", out.tree.to_json());
