@@ -365,21 +365,37 @@ impl Run<'_> {
         }
         let text = &self.tree.node(node).text;
         let w = self.world()?;
+        let named = &self.goals.named_objects;
+        let on_named = |a: &&Action| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id));
+        // By a verb the instruction says of the object, where one does it.
+        let said_of = |a: &&Action| a.args.first().is_some_and(|o| self.goals.wording.verbs_of(o.id).contains(&a.verb));
         let achieving: Vec<Action> = match self.goals.meaning(text) {
-            Some(goals::Meaning::Verb(v)) => list.iter().filter(|a| a.verb == *v).cloned().collect(),
+            // An action line is done on the objects the words say it of, else on named ones
+            // (SmolLM2 washed the bathtub for "wash the dishes"), where it can be.
+            Some(goals::Meaning::Verb(v)) => {
+                let doing: Vec<Action> = list.iter().filter(|a| a.verb == *v).cloned().collect();
+                let said: Vec<u32> = self.goals.wording.said.iter().filter(|(_, x)| x == v).map(|(o, _)| *o).collect();
+                // Where none it is said of is within reach (the plates across the kitchen), the
+                // walk to them first: an action line's step is never a target (it changes nothing).
+                let walks: Vec<Action> =
+                    list.iter().filter(|a| a.verb == Verb::Walk && a.args.first().is_some_and(|o| said.contains(&o.id))).cloned().collect();
+                if !doing.iter().any(|a| said_of(&a)) && !walks.is_empty() {
+                    walks
+                } else {
+                    narrowed(narrowed(doing, on_named), said_of)
+                }
+            }
             Some(goals::Meaning::Fact(f)) => {
                 let making: Vec<Action> =
                     list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect();
                 // A line about the robot alone ("character is SITTING") came of an action on an
                 // object the instruction names: made true there, where it can be (SmolLM2 sat
                 // on a chair when asked to sit on the sofa).
-                let named = &self.goals.named_objects;
-                let on_named = |a: &&Action| !a.args.is_empty() && a.args.iter().all(|o| named.contains(&o.id));
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
                 let making = if alone { narrowed(making, on_named) } else { making };
-                // And by a verb the instruction says of the object, where one does it ("sit on
-                // the sofa": SIT, not LIE, for "character is ON to sofa").
-                narrowed(making, |a| a.args.first().is_some_and(|o| self.goals.wording.verbs_of(o.id).contains(&a.verb)))
+                // And by a verb the instruction says of the object ("sit on the sofa": SIT, not
+                // LIE, for "character is ON to sofa").
+                narrowed(making, said_of)
             }
             None => {
                 let verbs = goals::line_verbs(text);

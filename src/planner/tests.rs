@@ -1329,6 +1329,29 @@ fn the_root_does_what_a_verb_word_says_before_it_is_done() {
     assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[GRAB] <milk> (13)"), "{:?}", out.tree.to_json());
 }
 
+#[test]
+fn an_action_line_is_done_on_the_object_the_words_say_it_of() {
+    // TOUCH changes nothing the world records: its line is what "touch" says; below it the model
+    // writes the steps of `script`.
+    let go = |toward_lines: bool, script: &[&str]| {
+        let mut m = Scripted::new(script);
+        m.preferences = ["subgoal: TOUCH".to_string(), "done".to_string()].into();
+        let cfg = PlannerConfig { infer_goals: true, toward_lines, lines_done_at: None, ..defaults() };
+        let req = PlanRequest::new("touch the apple", vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+        assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+        (plan_lines(&out), m.grammars)
+    };
+    // The way to the apple is the only step (no call), then TOUCH of the apple the only action.
+    let (plan, grammars) = go(true, &["action: [TOUCH] <apple> (12)"]);
+    assert_eq!(plan, ["[WALK] <apple> (12)", "[TOUCH] <apple> (12)"]);
+    assert!(grammars.len() == 1 && !grammars[0].contains("<bread> (14)"), "{grammars:?}");
+    // Without the narrowing the model may walk to the bread and touch it.
+    let (plan, grammars) = go(false, &["action: [WALK] <bread> (14)", "action: [TOUCH] <bread> (14)"]);
+    assert_eq!(plan, ["[WALK] <bread> (14)", "[TOUCH] <bread> (14)"]);
+    assert!(grammars.iter().all(|g| g.contains("<bread> (14)")), "{grammars:?}");
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
