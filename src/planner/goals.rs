@@ -847,11 +847,15 @@ mod tests {
         assert!(line_verbs("READ or the fridge").is_empty());
     }
 
+    /// The objects `text` names among all of `w`'s.
+    fn named_in(w: &World, text: &str) -> Vec<u32> {
+        instruction_objects(w, &w.nodes().map(|n| n.id).collect::<Vec<u32>>(), text)
+    }
+
     #[test]
     fn an_instruction_names_objects_by_their_class_in_words_whole_names_first() {
         let w = World::demo();
-        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        let names = |t: &str| instruction_objects(&w, &all, t);
+        let names = |t: &str| named_in(&w, t);
         assert_eq!(names("Put the apples in the fridge."), [10, 12]);
         // Two words for one name, and the longer name first: not the kitchen, not any other table.
         assert_eq!(names("put the remote control on the coffee table"), [32, 33]);
@@ -891,17 +895,15 @@ mod tests {
         assert!(unknown_objects(&World::demo(), "wash the dishes").is_empty());
         // Groceries are VirtualHome's Food (apple 12, milk 13, bread 14); "knives" is knife's plural.
         let w = World::demo();
-        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        assert_eq!(instruction_objects(&w, &all, "put the groceries in the fridge"), [10, 12, 13, 14]);
+        assert_eq!(named_in(&w, "put the groceries in the fridge"), [10, 12, 13, 14]);
         assert!(unknown_objects(&w, "put the groceries in the fridge").is_empty());
-        assert_eq!(instruction_objects(&w, &all, "put the knives in the sink"), [20, 24]);
+        assert_eq!(named_in(&w, "put the knives in the sink"), [20, 24]);
     }
 
     #[test]
     fn of_several_objects_a_word_names_those_in_the_place_the_instruction_is_about() {
         let w = World::demo();
-        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        let names = |t: &str| instruction_objects(&w, &all, t);
+        let names = |t: &str| named_in(&w, t);
         // Lights 23 (kitchen) and 35 (living room): the room named, else the room of the sofa.
         assert_eq!(names("turn on the light in the living room"), [2, 35]);
         assert_eq!(names("sit on the sofa and turn on the lamp"), [30, 35]);
@@ -920,7 +922,7 @@ mod tests {
             node["class_name"] = serde_json::json!(renamed);
         }
         let w = World::from_json(&g.to_string(), "test").unwrap();
-        let names = |t: &str| instruction_objects(&w, &all, t);
+        let names = |t: &str| named_in(&w, t);
         assert_eq!(names("turn on the light in the kitchen"), [1, 23]);
         assert_eq!(names("walk to the living room and read a book"), [2, 34]);
         // A name of two words stays the object's.
