@@ -449,7 +449,7 @@ impl Run<'_> {
         }
         let prior = match uninstructed {
             Some(p) => {
-                let likeliest = |s: &[Score]| (0..s.len()).fold(0, |best, i| if s[i].logprob > s[best].logprob { i } else { best });
+                let likeliest = |s: &[Score]| index_of_best(s.len(), |i| s[i].logprob);
                 Some(self.scores("calibrate", node, p, &answers, likeliest)?.0.iter().map(|s| s.logprob).collect::<Vec<f64>>())
             }
             None => None,
@@ -487,7 +487,7 @@ impl Run<'_> {
         mut fields: serde_json::Value,
     ) -> Result<usize, StopCause> {
         let value = |scores: &[Score], i: usize| key(&scores[i]) - prior.map_or(0.0, |p| p[i]);
-        let best_of = |scores: &[Score]| (0..scores.len()).fold(0, |best, i| if value(scores, i) > value(scores, best) { i } else { best });
+        let best_of = |scores: &[Score]| index_of_best(scores.len(), |i| value(scores, i));
         let (scores, best) = self.scores(role, node, prompt, answers, best_of)?;
         let mut top: Vec<(f64, &str)> = (0..scores.len()).map(|i| value(&scores, i)).zip(answers.iter().map(String::as_str)).collect();
         top.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -618,6 +618,11 @@ pub(crate) fn named_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
 
 /// The most steps [`Run::effects_menu`] shows (a prompt's tail stays a few hundred tokens).
 const MAX_SHOWN_STEPS: usize = 24;
+
+/// The index in `0..n` of the greatest `value` (the first on a tie; 0 where `n` is 0).
+fn index_of_best(n: usize, value: impl Fn(usize) -> f64) -> usize {
+    (0..n).fold(0, |best, i| if value(i) > value(best) { i } else { best })
+}
 
 /// The actions of `list` that pass `keep`, where any does; else `list` whole: a preference among
 /// ways, never a reason to have none.

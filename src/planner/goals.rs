@@ -681,7 +681,6 @@ fn mentions(w: &World, focus: &[u32], text: &str) -> Vec<(usize, usize, Vec<u32>
         .filter_map(|&id| w.node(id).map(|n| (id, parts(n.class_name))))
         .filter(|(_, p)| !p.is_empty())
         .collect();
-    let singular = word_forms;
     let rooms_called = |forms: &[String]| -> Vec<u32> {
         let classes: Vec<&str> =
             ROOM_NAMES.iter().filter(|(name, _)| forms.iter().any(|f| f == name)).flat_map(|(_, c)| c.iter().copied()).collect();
@@ -697,7 +696,7 @@ fn mentions(w: &World, focus: &[u32], text: &str) -> Vec<(usize, usize, Vec<u32>
     'words: while i < words.len() {
         for n in (1..=4.min(words.len() - i)).rev() {
             let head = words[i..i + n - 1].concat();
-            let forms: Vec<String> = singular(words[i + n - 1]).into_iter().map(|last| format!("{head}{last}")).collect();
+            let forms: Vec<String> = word_forms(words[i + n - 1]).into_iter().map(|last| format!("{head}{last}")).collect();
             let hits: Vec<u32> =
                 objects.iter().filter(|(_, p)| forms.contains(&p.concat())).map(|(id, _)| *id).collect();
             let hits = if hits.is_empty() { rooms_called(&forms) } else { hits };
@@ -724,7 +723,7 @@ fn mentions(w: &World, focus: &[u32], text: &str) -> Vec<(usize, usize, Vec<u32>
         if says_a_verb(x) {
             continue;
         }
-        let forms = singular(x);
+        let forms = word_forms(x);
         // A word for a kind of thing ("dishes"): the objects of that kind.
         let kinds: Vec<&str> = KINDS.iter().filter(|(word, _)| forms.iter().any(|f| f == word)).flat_map(|(_, k)| k.iter().copied()).collect();
         let of_kind: Vec<u32> = objects

@@ -1293,40 +1293,35 @@ fn first_then(instruction: &str, script: &[&str], said_lines: bool, first: &str,
     (out, m)
 }
 
+/// With the words' rule, back at the root after `first`, `done` is not offered while `line` is, and
+/// the plan ends with `last_with`; without it the model's `done` there ends the plan at
+/// `last_without`.
+fn taken_before_done(instruction: &str, script: &[&str], first: &str, line: &str, last_with: &str, last_without: &str) {
+    let line = format!("subgoal: {line}");
+    let (out, m) = first_then(instruction, script, true, first, &line);
+    assert!(m.scored[1].contains(&line) && !m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some(last_with), "{:?}", out.tree.to_json());
+    assert_eq!(out.stop, StopCause::Done);
+    let (out, m) = first_then(instruction, script, false, first, "done");
+    assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
+    assert_eq!(plan_lines(&out).last().map(String::as_str), Some(last_without), "{:?}", out.tree.to_json());
+}
+
 #[test]
 fn the_root_takes_what_the_words_say_before_it_is_done() {
-    let closed = "subgoal: fridge is CLOSED".to_string();
-    let go = |said_lines: bool, second: &str| {
-        first_then("put the apple in the fridge and close it", &[], said_lines, &format!("subgoal: {APPLE_IN_FRIDGE}"), second)
-    };
-    // Back at the root after the apple's line, `done` is not offered while the fridge's is.
-    let (out, m) = go(true, &closed);
-    assert!(m.scored[1].contains(&closed) && !m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
-    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[CLOSE] <fridge> (10)"), "{:?}", out.tree.to_json());
-    assert_eq!(out.stop, StopCause::Done);
-    // Without the words the model's `done` there ends the root with the fridge open.
-    let (out, m) = go(false, "done");
-    assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
-    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[PUTIN] <apple> (12) <fridge> (10)"));
+    // "…and close it": the fridge's line after the apple's, not `done` with the fridge open.
+    let apple = format!("subgoal: {APPLE_IN_FRIDGE}");
+    let (closed, put) = ("[CLOSE] <fridge> (10)", "[PUTIN] <apple> (12) <fridge> (10)");
+    taken_before_done("put the apple in the fridge and close it", &[], &apple, "fridge is CLOSED", closed, put);
 }
 
 #[test]
 fn the_root_does_what_a_verb_word_says_before_it_is_done() {
-    // DRINK changes nothing the world records: its line is what "drink" says, whatever follows.
-    let drink = "subgoal: DRINK".to_string();
-    // (below the DRINK line the model writes the step: the milk or another drink)
-    let go = |said_lines: bool, second: &str| {
-        first_then("drink the milk", &["action: [DRINK] <milk> (13)"], said_lines, "subgoal: character is HOLDS_RH to milk", second)
-    };
-    // Back at the root holding the milk, `done` is not offered while DRINK is.
-    let (out, m) = go(true, &drink);
-    assert!(m.scored[1].contains(&drink) && !m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
-    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[DRINK] <milk> (13)"), "{:?}", out.tree.to_json());
-    assert_eq!(out.stop, StopCause::Done);
-    // Without the words the model's `done` there ends the root with the milk not drunk.
-    let (out, m) = go(false, "done");
-    assert!(m.scored[1].contains(&"done".to_string()), "{:?}", m.scored[1]);
-    assert_eq!(plan_lines(&out).last().map(String::as_str), Some("[GRAB] <milk> (13)"), "{:?}", out.tree.to_json());
+    // DRINK changes nothing the world records: its line is what "drink" says, whatever follows;
+    // below it the model writes the step (the milk or another drink). Without it the milk is held,
+    // not drunk.
+    let (first, script) = ("subgoal: character is HOLDS_RH to milk", ["action: [DRINK] <milk> (13)"]);
+    taken_before_done("drink the milk", &script, first, "DRINK", "[DRINK] <milk> (13)", "[GRAB] <milk> (13)");
 }
 
 #[test]
