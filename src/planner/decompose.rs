@@ -381,6 +381,19 @@ impl Run<'_> {
                     list.iter().filter(|a| a.verb == Verb::Walk && a.args.first().is_some_and(|o| said.contains(&o.id))).cloned().collect();
                 if !doing.iter().any(|a| said_of(&a)) && !walks.is_empty() {
                     walks
+                } else if doing.is_empty() {
+                    // Where the verb cannot be done now (the water to drink is not in hand), the
+                    // first step of the way to doing it on a named object (one the words say it
+                    // of, where there is one); with no way, none, and the line ends. Any step at
+                    // all was offered before: SmolLM2 sat on six seats in turn under "DRINK".
+                    let aims = typed_actions(w, named).into_iter().filter(|a| a.verb == *v && on_named(&a)).collect();
+                    let aims = narrowed(aims, said_of);
+                    let mut first: Vec<Action> = Vec::new();
+                    for a in &aims {
+                        let way = w.way_to(a).map(|(way, _)| way).filter(|way| way.iter().all(|s| self.in_focus(s)));
+                        first.extend(way.and_then(|way| way.into_iter().next()).filter(|s| list.contains(s) && !first.contains(s)));
+                    }
+                    return Ok(ActionSet::Exact(first));
                 } else {
                     narrowed(narrowed(doing, on_named), said_of)
                 }

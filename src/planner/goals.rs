@@ -299,7 +299,7 @@ pub fn candidates(
         };
         out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { state, .. }) if unsaid(state)));
     }
-    let said = wording.map(|words| words.keep_said(robot, &made_by, &mut out)).unwrap_or_default();
+    let said = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
     (out, said)
 }
 
@@ -423,7 +423,8 @@ impl Wording {
     /// its verb, and nothing else asks for it) with the posture they put the robot in ("lie
     /// down": LYING). Of two opposite verbs said of one object ("open the fridge, …, close it"),
     /// only the later is a group: the words end there.
-    fn keep_said(&self, robot: u32, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> Vec<Vec<String>> {
+    fn keep_said(&self, w: &World, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> Vec<Vec<String>> {
+        let robot = w.character();
         let verbs_of_line = |line: &str, m: &Meaning| -> Vec<Verb> {
             let mut v: Vec<Verb> = made_by.iter().filter(|(l, _)| l == line).map(|(_, v)| *v).collect();
             if let Meaning::Fact(Fact::State { state, .. }) = m {
@@ -449,11 +450,16 @@ impl Wording {
         for (x, _) in self.said.iter().filter(|(x, v)| *v == Verb::Grab && !self.relations.iter().any(|(from, _, _)| from == x)) {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
         }
+        // (Where the relation said holds already, the words cannot ask for it: the other
+        // placement is what they can bring about. VirtualHome's houses keep dishes INSIDE the
+        // dishwasher that "put the plates into the dishwasher" is to put ON it, as its own
+        // programs load a dishwasher with PUTBACK.)
+        let other = |r: Relation| if r == Relation::Inside { Relation::On } else { Relation::Inside };
+        let already = |from: u32, relation: Relation, to: u32| w.holds(&Fact::Edge { from, relation, to });
         for &(from, keep, to) in &self.relations {
-            let other = if keep == Relation::Inside { Relation::On } else { Relation::Inside };
             let edge = |relation| Meaning::Fact(Fact::Edge { from, relation, to });
-            if out.iter().any(|(_, m)| *m == edge(keep)) {
-                out.retain(|(_, m)| *m != edge(other));
+            if out.iter().any(|(_, m)| *m == edge(keep)) && !already(from, keep, to) {
+                out.retain(|(_, m)| *m != edge(other(keep)));
             }
         }
         let mut groups: Vec<Vec<String>> = Vec::new();
@@ -471,7 +477,12 @@ impl Wording {
             add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
         }
         for once in &self.relations_once {
-            let said = |m: &Meaning| once.iter().any(|&(from, relation, to)| *m == Meaning::Fact(Fact::Edge { from, relation, to }));
+            let said = |m: &Meaning| {
+                once.iter().any(|&(from, relation, to)| {
+                    let r = if already(from, relation, to) { other(relation) } else { relation };
+                    *m == Meaning::Fact(Fact::Edge { from, relation: r, to })
+                })
+            };
             add(out.iter().filter(|(_, m)| said(m)).map(|(l, _)| l.clone()).collect());
         }
         // A verb word's action line, or the posture its verb puts the robot in ("lie down":
@@ -1054,6 +1065,16 @@ mod tests {
         assert!(has(&on, "bread is ON to sink") && !has(&on, "bread is INSIDE to sink"), "{on:?}");
         assert!(on.iter().any(|l| l.starts_with("character is HOLDS")), "{on:?}");
         assert!(has(&lines(&[14, 20], "put the bread on the sink", false), "bread is INSIDE to sink"));
+        // The plate (17) is INSIDE the kitchen cabinet (16) already: "put the plate in the
+        // cabinet" cannot ask for that, so the other placement stays, and is the thing said.
+        let kept = lines(&[16, 17], "put the plate in the kitchen cabinet", true);
+        assert!(has(&kept, "plate is ON to kitchencabinet"), "{kept:?}");
+        let words = Wording::of(&w, &[16, 17], "put the plate in the kitchen cabinet");
+        let said = candidates(&w, &[16, 17], &[], Some("put the plate in the kitchen cabinet"), &[16, 17], Some(&words)).1;
+        assert!(said.contains(&vec!["plate is ON to kitchencabinet".to_string()]), "{said:?}");
+        // Where it does not hold yet, the relation said is the only one.
+        let apple = lines(&[12, 16], "put the apple in the kitchen cabinet", true);
+        assert!(has(&apple, "apple is INSIDE to kitchencabinet") && !has(&apple, "apple is ON to kitchencabinet"), "{apple:?}");
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));

@@ -1347,6 +1347,30 @@ fn an_action_line_is_done_on_the_object_the_words_say_it_of() {
     assert!(grammars.iter().all(|g| g.contains("<bread> (14)")), "{grammars:?}");
 }
 
+#[test]
+fn an_action_line_with_no_way_left_to_it_ends_without_a_step() {
+    // Water poured away is out of hand and cannot be drunk: below DRINK no step is offered, only
+    // `done` (any step of the house was offered before: SmolLM2 sat on six seats in turn).
+    let scene = r#"{"nodes": [
+        {"id": 1, "class_name": "kitchen", "category": "Rooms", "properties": [], "states": []},
+        {"id": 2, "class_name": "character", "category": "Characters", "properties": [], "states": []},
+        {"id": 3, "class_name": "sink", "category": "Furniture", "properties": ["RECIPIENT", "CONTAINERS"], "states": []},
+        {"id": 4, "class_name": "water", "category": "Food", "properties": ["GRABBABLE", "DRINKABLE", "POURABLE"], "states": []},
+        {"id": 5, "class_name": "chair", "category": "Furniture", "properties": ["SITTABLE", "GRABBABLE", "MOVABLE", "SURFACES"], "states": []}],
+      "edges": [{"from_id": 2, "relation_type": "INSIDE", "to_id": 1}, {"from_id": 3, "relation_type": "INSIDE", "to_id": 1},
+        {"from_id": 4, "relation_type": "INSIDE", "to_id": 1}, {"from_id": 5, "relation_type": "INSIDE", "to_id": 1}]}"#;
+    let mut m = Scripted::new(&["done"]);
+    m.preferences = ["subgoal: water is INSIDE to sink", "subgoal: DRINK", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("pour the water into the sink and drink the water", vec![]);
+    let w = World::from_json(scene, "test").unwrap();
+    let out = plan(&mut m, &mut SimEnv::new(w, vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert_eq!(plan_lines(&out), ["[WALK] <water> (4)", "[GRAB] <water> (4)", "[WALK] <sink> (3)", "[POUR] <water> (4) <sink> (3)"]);
+    assert!(out.tree.nodes().any(|n| n.text == "DRINK"));
+    assert!(m.grammars.len() == 1 && !m.grammars[0].contains('['), "{:?}", m.grammars);
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
