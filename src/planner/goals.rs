@@ -83,7 +83,8 @@ impl Goals {
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
-    /// the same object (ON after OFF, CLOSED after OPEN, PLUGGED_OUT after PLUGGED_IN), or another
+    /// the same object (ON after OFF, CLOSED after OPEN, PLUGGED_OUT after PLUGGED_IN, the robot
+    /// SITTING after LYING), or another
     /// place for an object (INSIDE the dishwasher after ON it: an object is in one place; SmolLM2
     /// took both and its steps went round the dishwasher).
     pub fn contradicts_taken(&self, line: &str) -> bool {
@@ -122,7 +123,7 @@ pub fn line_verbs(line: &str) -> Vec<Verb> {
     }
 }
 
-/// The other state of a two-state pair.
+/// The other state of a two-state pair, or the robot's other posture.
 fn opposite(s: State) -> Option<State> {
     Some(match s {
         State::On => State::Off,
@@ -131,6 +132,8 @@ fn opposite(s: State) -> Option<State> {
         State::Closed => State::Open,
         State::PluggedIn => State::PluggedOut,
         State::PluggedOut => State::PluggedIn,
+        State::Sitting => State::Lying,
+        State::Lying => State::Sitting,
         _ => return None,
     })
 }
@@ -446,8 +449,11 @@ impl Wording {
             }
         }
         // What the words say to take ("take a book from the shelf and read it") stays in hand
-        // unless they say where it goes: SmolLM2 put the book it had read down on the sofa.
-        for (x, _) in self.said.iter().filter(|(x, v)| *v == Verb::Grab && !self.relations.iter().any(|(from, _, _)| from == x)) {
+        // unless they say where it goes: SmolLM2 put the book it had read down on the sofa. What
+        // they say to sit or lie on stays where it is: SmolLM2 put the chair it was to sit on
+        // onto the CD player it was to pick up.
+        let keeps_its_place = |v: &Verb| matches!(v, Verb::Grab | Verb::Sit | Verb::Lie);
+        for (x, _) in self.said.iter().filter(|(x, v)| keeps_its_place(v) && !self.relations.iter().any(|(from, _, _)| from == x)) {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
         }
         // (Where the relation said holds already, the words cannot ask for it: the other
@@ -491,15 +497,19 @@ impl Wording {
             matches!(m, Meaning::Fact(Fact::State { id, .. }) if *id == robot)
                 && made_by.iter().any(|(ml, v)| ml == l && verbs.contains(v))
         };
-        for verbs in &self.verb_words {
-            let of = |(l, m): &&(String, Meaning)| matches!(m, Meaning::Verb(v) if verbs.contains(v)) || posture(l, m, verbs);
+        // (Of two postures said in turn, "sit on the sofa … then sleep on it", the later: the
+        // words end there.)
+        for (i, verbs) in self.verb_words.iter().enumerate() {
+            let later = |v: &Verb| opposite_verb(*v).is_some_and(|o| self.verb_words[i + 1..].iter().flatten().any(|x| *x == o));
+            let verbs: Vec<Verb> = verbs.iter().copied().filter(|v| !later(v)).collect();
+            let of = |(l, m): &&(String, Meaning)| matches!(m, Meaning::Verb(v) if verbs.contains(v)) || posture(l, m, &verbs);
             add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
         }
         groups
     }
 }
 
-/// The verb that undoes what `v` does, for the verbs of the two-state pairs.
+/// The verb that undoes what `v` does, for the verbs of the two-state pairs and the postures.
 fn opposite_verb(v: Verb) -> Option<Verb> {
     Some(match v {
         Verb::Open => Verb::Close,
@@ -508,6 +518,9 @@ fn opposite_verb(v: Verb) -> Option<Verb> {
         Verb::SwitchOff => Verb::SwitchOn,
         Verb::PlugIn => Verb::PlugOut,
         Verb::PlugOut => Verb::PlugIn,
+        // (one posture ends the other)
+        Verb::Sit => Verb::Lie,
+        Verb::Lie => Verb::Sit,
         _ => return None,
     })
 }
@@ -595,6 +608,14 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["pat"], &[Verb::Touch]),
     (&["stroke"], &[Verb::Touch]),
     (&["sip"], &[Verb::Drink]),
+    // Lying down in other words ("lay on the sofa", "sleep in the bed"); "lay" before an object
+    // puts that object down, so only before a particle.
+    (&["lay", "down"], &[Verb::Lie]),
+    (&["lay", "on"], &[Verb::Lie]),
+    (&["lay", "in"], &[Verb::Lie]),
+    (&["lying"], &[Verb::Lie]),
+    (&["sleep", "on"], &[Verb::Lie]),
+    (&["sleep", "in"], &[Verb::Lie]),
     (&["press"], &[Verb::Push]),
 ];
 
@@ -1060,6 +1081,10 @@ mod tests {
         assert!(has(&sit, "character is ON to chair") && has(&sit, "character is SITTING"), "{sit:?}");
         assert!(!sit.iter().any(|l| l.contains("HOLDS")), "{sit:?}");
         assert!(lines(&[19], "sit on the chair", false).iter().any(|l| l.contains("HOLDS")));
+        // Nor is the chair to be put anywhere.
+        let seat = lines(&[19, 18], "sit on the chair", true);
+        assert!(!seat.iter().any(|l| l.starts_with("chair is ON")), "{seat:?}");
+        assert!(lines(&[19, 18], "sit on the chair", false).iter().any(|l| l.starts_with("chair is ON")));
         // The bread (14) on the sink (20), not in it; the bread's other lines stay.
         let on = lines(&[14, 20], "put the bread on the sink", true);
         assert!(has(&on, "bread is ON to sink") && !has(&on, "bread is INSIDE to sink"), "{on:?}");
@@ -1119,6 +1144,16 @@ mod tests {
         // "character is ON to sofa".
         let lie = said(&[30], "lie down on the sofa");
         assert!(lie.contains(&vec!["character is LYING".to_string()]), "{lie:?}");
+        // The everyday words for lying down say the same; "lay" only before a particle ("lay
+        // the book on the sofa" puts the book there).
+        for t in ["lay on the sofa", "I lay down on the sofa", "sleep on the sofa", "lying on the sofa"] {
+            assert_eq!(said(&[30], t), lie, "{t}");
+        }
+        assert!(!said(&[34, 30], "lay the book on the sofa").contains(&vec!["character is LYING".to_string()]));
+        // Of two postures in turn, the later is what the words end with.
+        let both = said(&[30], "sit on the sofa and relax, then sleep on the sofa");
+        assert!(both.contains(&vec!["character is LYING".to_string()]), "{both:?}");
+        assert!(!both.contains(&vec!["character is SITTING".to_string()]), "{both:?}");
     }
 
     #[test]
