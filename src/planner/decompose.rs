@@ -386,7 +386,7 @@ impl Run<'_> {
                     // first step of the way to doing it on a named object (one the words say it
                     // of, where there is one); with no way, none, and the line ends. Any step at
                     // all was offered before: SmolLM2 sat on six seats in turn under "DRINK".
-                    let aims = typed_actions(w, named).into_iter().filter(|a| a.verb == *v && on_named(&a)).collect();
+                    let aims = typed_actions(w, named).into_iter().filter(|a| a.verb == *v).collect();
                     let aims = narrowed(aims, said_of);
                     let mut first: Vec<Action> = Vec::new();
                     for a in &aims {

@@ -294,7 +294,7 @@ pub fn candidates(
     // light"): nothing else asks for it, and SmolLM2 unplugged the television it was to watch.
     // Nor is a clean object, where they name no washing: SmolLM2 scrubbed the book it was to read.
     if let Some(t) = instruction {
-        let washing = [Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse].iter().any(|&v| names_verb(t, v));
+        let washing = WASHING.iter().any(|&v| names_verb(t, v));
         let unsaid = |s: &State| match s {
             State::Off | State::PluggedOut => !state_verb(*s).is_some_and(|v| names_verb(t, v)),
             State::Clean => !washing,
@@ -475,8 +475,7 @@ impl Wording {
             }
         };
         for (i, once) in self.said_once.iter().enumerate() {
-            let later = |x: u32, v: Verb| opposite_verb(v).is_some_and(|o| self.said_once[i + 1..].iter().flatten().any(|p| *p == (x, o)));
-            if once.iter().any(|&(x, v)| later(x, v)) {
+            if once.iter().any(|&(x, v)| undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)))) {
                 continue;
             }
             let of = |(l, m): &&(String, Meaning)| once.iter().any(|&(x, v)| alone_on(m, x) && verbs_of_line(l, m).contains(&v));
@@ -500,13 +499,18 @@ impl Wording {
         // (Of two postures said in turn, "sit on the sofa … then sleep on it", the later: the
         // words end there.)
         for (i, verbs) in self.verb_words.iter().enumerate() {
-            let later = |v: &Verb| opposite_verb(*v).is_some_and(|o| self.verb_words[i + 1..].iter().flatten().any(|x| *x == o));
-            let verbs: Vec<Verb> = verbs.iter().copied().filter(|v| !later(v)).collect();
+            let verbs: Vec<Verb> = verbs.iter().copied().filter(|&v| !undone_later(&self.verb_words[i + 1..], opposite_verb(v))).collect();
             let of = |(l, m): &&(String, Meaning)| matches!(m, Meaning::Verb(v) if verbs.contains(v)) || posture(l, m, &verbs);
             add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
         }
         groups
     }
+}
+
+/// Whether what undoes a thing said (`undo`: its opposite verb, with its object where it has one)
+/// is said in one of the `later` entries: the words end there, so the earlier is not a thing said.
+fn undone_later<T: PartialEq>(later: &[Vec<T>], undo: Option<T>) -> bool {
+    undo.is_some_and(|u| later.iter().flatten().any(|x| *x == u))
 }
 
 /// The verb that undoes what `v` does, for the verbs of the two-state pairs and the postures.
@@ -587,6 +591,9 @@ const PHRASE_ENDS: &[&str] = &[
     "then", "off", "out", "up", "down", "back",
 ];
 
+/// The verbs that wash something: what "clean" says, and what a CLEAN line needs the words to name.
+const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse];
+
 /// Everyday phrases for the embodiment's verbs that do not begin with the verb's name ("pick up
 /// the phone": GRAB; "turn on the lamp": SWITCHON). A word of four letters or more also matches
 /// its longer forms ("turning", "switched").
@@ -601,7 +608,7 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["shut"], &[Verb::Close]),
     (&["plug", "in"], &[Verb::PlugIn]),
     (&["unplug"], &[Verb::PlugOut]),
-    (&["clean"], &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse]),
+    (&["clean"], WASHING),
     (&["pet"], &[Verb::Touch]),
     (&["pets"], &[Verb::Touch]),
     (&["petting"], &[Verb::Touch]),
@@ -883,6 +890,13 @@ mod tests {
         instruction_objects(w, &w.nodes().map(|n| n.id).collect::<Vec<u32>>(), text)
     }
 
+    /// The demo scene with `edit` made to its graph's JSON.
+    fn demo_edited(edit: impl FnOnce(&mut serde_json::Value)) -> World {
+        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
+        edit(&mut g);
+        World::from_json(&g.to_string(), "test").unwrap()
+    }
+
     #[test]
     fn an_instruction_names_objects_by_their_class_in_words_whole_names_first() {
         let w = World::demo();
@@ -904,25 +918,23 @@ mod tests {
 
     #[test]
     fn a_word_names_every_kind_its_class_names_begin_with() {
-        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
-        for (id, class) in [(40, "washing_machine"), (41, "clothes_pants"), (42, "clothes_shirt"), (43, "coffee_pot")] {
-            g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
-                {"id": id, "class_name": class, "category": "Props", "properties": [], "states": []}));
-            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": id, "relation_type": "INSIDE", "to_id": 1}));
-        }
-        let w = World::from_json(&g.to_string(), "test").unwrap();
-        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        assert_eq!(instruction_objects(&w, &all, "wash the clothes in the washing machine"), [40, 41, 42]);
-        assert_eq!(instruction_objects(&w, &all, "Wash the pants in the washingmachine"), [40, 41]);
+        let w = demo_edited(|g| {
+            for (id, class) in [(40, "washing_machine"), (41, "clothes_pants"), (42, "clothes_shirt"), (43, "coffee_pot")] {
+                g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
+                    {"id": id, "class_name": class, "category": "Props", "properties": [], "states": []}));
+                g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": id, "relation_type": "INSIDE", "to_id": 1}));
+            }
+        });
+        assert_eq!(named_in(&w, "wash the clothes in the washing machine"), [40, 41, 42]);
+        assert_eq!(named_in(&w, "Wash the pants in the washingmachine"), [40, 41]);
         // "coffee" alone: the coffee pot and the coffee table, the names beginning with it.
-        assert_eq!(instruction_objects(&w, &all, "make coffee"), [33, 43]);
+        assert_eq!(named_in(&w, "make coffee"), [33, 43]);
         // A word for a kind: its members (plate, knife, mug), not the names it begins.
-        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
-        g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
-            {"id": 44, "class_name": "dish_soap", "category": "Props", "properties": [], "states": []}));
-        let w = World::from_json(&g.to_string(), "test").unwrap();
-        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        assert_eq!(instruction_objects(&w, &all, "wash the dishes"), [17, 24, 25]);
+        let w = demo_edited(|g| {
+            g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
+                {"id": 44, "class_name": "dish_soap", "category": "Props", "properties": [], "states": []}));
+        });
+        assert_eq!(named_in(&w, "wash the dishes"), [17, 24, 25]);
         assert!(unknown_objects(&World::demo(), "wash the dishes").is_empty());
         // Groceries are VirtualHome's Food (apple 12, milk 13, bread 14); "knives" is knife's plural.
         let w = World::demo();
@@ -942,17 +954,17 @@ mod tests {
         // "Room" alone names no room.
         assert!(names("tidy up my room").is_empty());
         // VirtualHome's names for the kitchen and the living room, and for a book.
-        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
-        for node in g["nodes"].as_array_mut().unwrap() {
-            let renamed = match node["class_name"].as_str() {
-                Some("kitchen") => "dining_room",
-                Some("living_room") => "home_office",
-                Some("book") => "novel",
-                _ => continue,
-            };
-            node["class_name"] = serde_json::json!(renamed);
-        }
-        let w = World::from_json(&g.to_string(), "test").unwrap();
+        let w = demo_edited(|g| {
+            for node in g["nodes"].as_array_mut().unwrap() {
+                let renamed = match node["class_name"].as_str() {
+                    Some("kitchen") => "dining_room",
+                    Some("living_room") => "home_office",
+                    Some("book") => "novel",
+                    _ => continue,
+                };
+                node["class_name"] = serde_json::json!(renamed);
+            }
+        });
         let names = |t: &str| named_in(&w, t);
         assert_eq!(names("turn on the light in the kitchen"), [1, 23]);
         assert_eq!(names("walk to the living room and read a book"), [2, 34]);
@@ -1199,9 +1211,7 @@ mod tests {
         let w = World::demo();
         assert!(candidates(&w, &[27], &[], None, &[], None).0.iter().any(|(l, _)| l == "door is CLOSED"));
         // Without its room it cannot be reached: CLOSED is not offered, OPEN (it holds) is.
-        let mut scene: serde_json::Value = serde_json::from_str(crate::world::DEMO_KITCHEN_JSON).unwrap();
-        scene["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE"));
-        let w = World::from_json(&scene.to_string(), "no_room.json").unwrap();
+        let w = demo_edited(|g| g["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE")));
         let lines: Vec<String> = candidates(&w, &[27], &[], None, &[], None).0.into_iter().map(|(l, _)| l).collect();
         assert!(!lines.contains(&"door is CLOSED".to_string()) && lines.contains(&"door is OPEN".to_string()), "{lines:?}");
     }
