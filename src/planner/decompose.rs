@@ -165,11 +165,15 @@ impl Run<'_> {
         // A root choosing its own goal lines (`infer_goals`) is done when the model says so, once
         // it has taken one.
         // (nor while a thing its instruction's words say is offered and none of its lines taken:
-        // "put the apple in the fridge and close it")
+        // "put the apple in the fridge and close it"; nor when it has only gone into rooms and a
+        // line about something else is offered: "go to the toilet")
         let inferring = offered && self.goals.inferred;
         let unsaid = |g: &Vec<String>| !g.iter().any(|l| st.tried.contains(l)) && g.iter().any(|l| subgoal_menu.contains(l));
         let allow_done = if inferring {
-            !st.tried.is_empty() && !self.goals.said.iter().any(unsaid)
+            let arrived_only = self.goals.only_arrived(self.world()?, &st.tried, &subgoal_menu);
+            !st.tried.is_empty()
+                && !self.goals.said.iter().any(unsaid)
+                && !arrived_only
         } else {
             !(target.is_some() && self.cfg.target_steps)
                 && !(offered && allow_subgoal)

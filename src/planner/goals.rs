@@ -100,6 +100,17 @@ impl Goals {
         }
     }
 
+    /// Whether the inferred lines `taken` so far only put the robot in a room while `menu` still
+    /// offers a line about something else: walking into a room is on the way to what the words
+    /// name there ("go to the toilet": into the bathroom first), not all of it.
+    pub fn only_arrived(&self, w: &World, taken: &[String], menu: &[String]) -> bool {
+        let arriving = |l: &String| {
+            matches!(self.meaning(l), Some(Meaning::Fact(Fact::Edge { from, relation: Relation::Inside, to }))
+                if Some(*from) == self.robot && w.node(*to).is_some_and(|n| n.is_room()))
+        };
+        taken.iter().all(arriving) && menu.iter().any(|l| !arriving(l))
+    }
+
     /// The root took `line`: an inferred line's fact is kept from now on, or its verb named.
     pub fn take(&mut self, line: &str) {
         let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return };

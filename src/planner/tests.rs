@@ -1371,6 +1371,25 @@ fn an_action_line_with_no_way_left_to_it_ends_without_a_step() {
     assert!(m.grammars.len() == 1 && !m.grammars[0].contains('['), "{:?}", m.grammars);
 }
 
+#[test]
+fn going_into_a_room_is_not_all_of_words_that_name_a_thing_there() {
+    // "go to the toilet": SmolLM2 walked into the bathroom and was done. After the room's line
+    // the root may not be done while a line about the thing named is offered; once one is taken
+    // it may.
+    let mut m = Scripted::new(&["action: [WALK] <living_room> (2)"]);
+    m.preferences = ["subgoal: character is INSIDE to living_room", "done", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("go into the living room and over to the sofa", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.scored);
+    let done_offered: Vec<bool> = m.scored.iter().map(|c| c.iter().any(|a| a == "done")).collect();
+    assert_eq!(done_offered, [false, false, true], "{:?}", m.scored);
+    assert!(m.scored[1].iter().any(|a| a.contains("sofa")), "{:?}", m.scored);
+    let plan = plan_lines(&out);
+    assert_eq!(plan.first().map(String::as_str), Some("[WALK] <living_room> (2)"), "{plan:?}");
+    assert!(plan.len() > 1 && plan[1..].iter().any(|a| a.contains("<sofa>")), "{plan:?}");
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
