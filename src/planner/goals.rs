@@ -392,25 +392,46 @@ impl Wording {
             }
             said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
         }
-        let mut relations = Vec::new();
-        let mut relations_once = Vec::new();
-        for pair in found.windows(2) {
-            let ((_, i, a), (j, _, b)) = (&pair[0], &pair[1]);
+        // The relation the words say between each object named and the next ("A in B", "A on B").
+        let relation_between = |(_, i, _): &(usize, usize, Vec<u32>), (j, _, _): &(usize, usize, Vec<u32>)| {
             let between = &words[*i..*j];
             let says = |preps: &[&str]| {
                 between.iter().any(|x| preps.contains(&x.as_str()))
                     && only(between, &|x| DETERMINERS.contains(&x) || preps.contains(&x) || x == "top" || x == "of")
             };
-            let relation = if says(&["in", "into", "inside"]) {
-                Relation::Inside
+            if says(&["in", "into", "inside"]) {
+                Some(Relation::Inside)
             } else if says(&["on", "onto"]) {
-                Relation::On
+                Some(Relation::On)
             } else {
-                continue;
-            };
-            let pairs: Vec<(u32, Relation, u32)> = a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))).collect();
-            relations.extend(pairs.iter().copied());
-            relations_once.push(pairs);
+                None
+            }
+        };
+        let next_relation: Vec<Option<Relation>> = found.windows(2).map(|p| relation_between(&p[0], &p[1])).collect();
+        // Objects in a list ("the phone and the kiwi on the TV stand", "the bread, the apple and
+        // the knife": commas are not words), each a thing said.
+        let joined = |x: &(usize, usize, Vec<u32>), y: &(usize, usize, Vec<u32>)| {
+            let between = &words[x.1..y.0.max(x.1)];
+            !between.is_empty() && only(between, &|w| w == "and" || DETERMINERS.contains(&w))
+        };
+        let mut relations = Vec::new();
+        let mut relations_once = Vec::new();
+        for (p, relation) in next_relation.iter().enumerate() {
+            let Some(relation) = *relation else { continue };
+            // The relation's first object, and those joined to it before it (not past the place
+            // of an earlier relation: "the cup in the sink and the plate on the table").
+            let mut froms = vec![p];
+            let mut q = p;
+            while q > 0 && joined(&found[q - 1], &found[q]) && !(q >= 2 && next_relation[q - 2].is_some()) {
+                q -= 1;
+                froms.push(q);
+            }
+            for f in froms.into_iter().rev() {
+                let (a, b) = (&found[f].2, &found[p + 1].2);
+                let pairs: Vec<(u32, Relation, u32)> = a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))).collect();
+                relations.extend(pairs.iter().copied());
+                relations_once.push(pairs);
+            }
         }
         Wording { said, relations, said_once, relations_once, verb_words }
     }
@@ -425,7 +446,9 @@ impl Wording {
     ///   relations to it) that no verb said of it brings about;
     /// - of "A in B" ("A on B"), the line "A is ON to B" ("INSIDE");
     /// - of an object the words say to take and say nothing of where it goes, the lines putting it
-    ///   on or in something.
+    ///   on or in something;
+    /// - of an object they say where to put, its switch, door and plug states that no verb said
+    ///   of it sets.
     ///
     /// `made_by` is every fact line with a verb that brings it about; a state line is also of the
     /// verb that sets that state (SWITCHON for ON).
@@ -466,6 +489,12 @@ impl Wording {
         let keeps_its_place = |v: &Verb| matches!(v, Verb::Grab | Verb::Sit | Verb::Lie);
         for (x, _) in self.said.iter().filter(|(x, v)| keeps_its_place(v) && !self.relations.iter().any(|(from, _, _)| from == x)) {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
+        }
+        // What the words put somewhere keeps the states no verb they say of it sets ("put the
+        // phone on the desk": SmolLM2 read "phone is ON" for it and switched the phone on).
+        for &(x, _, _) in &self.relations {
+            let verbs = self.verbs_of(x);
+            out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
         }
         // (Where the relation said holds already, the words cannot ask for it: the other
         // placement is what they can bring about. VirtualHome's houses keep dishes INSIDE the
@@ -1083,6 +1112,13 @@ mod tests {
         assert_eq!(of("put the book on top of the coffee table").relations, [(34, Relation::On, 33)]);
         // A name of two words is one mention.
         assert_eq!(of("put the remote control on the coffee table").relations, [(32, Relation::On, 33)]);
+        // Objects joined by "and" before a relation are each in it, not past an earlier one's place.
+        assert_eq!(of("put the apple and the milk in the fridge").relations, [(12, Relation::Inside, 10), (13, Relation::Inside, 10)]);
+        assert_eq!(of("I put the bread, the apple and the knife on the plate").relations.len(), 3);
+        assert_eq!(
+            of("put the mug in the sink and the plate on the kitchen table").relations,
+            [(25, Relation::Inside, 20), (17, Relation::On, 18)]
+        );
         assert!(of("put the apple near the fridge").relations.is_empty());
         assert!(of("take the apple from the fridge").relations.is_empty());
     }
@@ -1123,6 +1159,14 @@ mod tests {
         // Where it does not hold yet, the relation said is the only one.
         let apple = lines(&[12, 16], "put the apple in the kitchen cabinet", true);
         assert!(has(&apple, "apple is INSIDE to kitchencabinet") && !has(&apple, "apple is ON to kitchencabinet"), "{apple:?}");
+        // What the words put somewhere keeps its switch (the remote control, 32, on the coffee
+        // table, 33), unless they say to switch it on; the robot's lines about it stay.
+        let put = lines(&[32, 33], "put the remote control on the coffee table", true);
+        assert!(has(&put, "remote_control is ON to coffee_table") && !has(&put, "remote_control is ON"), "{put:?}");
+        assert!(put.iter().any(|l| l.starts_with("character is HOLDS")), "{put:?}");
+        assert!(has(&lines(&[32, 33], "put the remote control on the coffee table", false), "remote_control is ON"));
+        let on = lines(&[32, 33], "put the remote control on the coffee table and switch on the remote control", true);
+        assert!(has(&on, "remote_control is ON"), "{on:?}");
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
