@@ -405,6 +405,12 @@ impl Run<'_> {
             Some(goals::Meaning::Fact(f)) => {
                 let making: Vec<Action> =
                     list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect();
+                // With no step that makes it true (it would undo a line kept, or a hand is full),
+                // none, and the line ends: any step was offered before, and SmolLM2 switched on
+                // the phone it was to put on the desk.
+                if making.is_empty() {
+                    return Ok(ActionSet::Exact(Vec::new()));
+                }
                 // A line about the robot alone ("character is SITTING") came of an action on an
                 // object the instruction names: made true there, where it can be (SmolLM2 sat
                 // on a chair when asked to sit on the sofa).

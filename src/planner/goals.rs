@@ -96,6 +96,11 @@ impl Goals {
             Some(Meaning::Fact(Fact::Edge { from, relation, to })) if placed(relation) && Some(*from) != self.robot => {
                 self.kept.iter().any(|k| matches!(k, Fact::Edge { from: f, relation: r, to: t } if f == from && placed(r) && (r, t) != (relation, to)))
             }
+            // (a thing put somewhere is not to be held again: SmolLM2 took "character is HOLDS_RH
+            // to phone" after the phone was on the desk, and no step could keep both)
+            Some(Meaning::Fact(Fact::Edge { from, relation: Relation::HoldsRh | Relation::HoldsLh, to })) if Some(*from) == self.robot => {
+                self.kept.iter().any(|k| matches!(k, Fact::Edge { from: f, relation: r, .. } if f == to && placed(r)))
+            }
             _ => false,
         }
     }
@@ -111,11 +116,19 @@ impl Goals {
         taken.iter().all(arriving) && menu.iter().any(|l| !arriving(l))
     }
 
-    /// The root took `line`: an inferred line's fact is kept from now on, or its verb named.
+    /// The root took `line`: an inferred line's fact is kept from now on, or its verb named. A
+    /// thing put somewhere is no longer kept in hand: holding it was the way there.
     pub fn take(&mut self, line: &str) {
         let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return };
         match &self.meanings[i] {
-            Meaning::Fact(f) if !self.kept.contains(f) => self.kept.push(f.clone()),
+            Meaning::Fact(f) if !self.kept.contains(f) => {
+                if let Fact::Edge { from: x, relation: Relation::On | Relation::Inside, .. } = *f {
+                    if Some(x) != self.robot {
+                        self.kept.retain(|k| !matches!(k, Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. } if *to == x));
+                    }
+                }
+                self.kept.push(f.clone())
+            }
             Meaning::Verb(v) if !self.named_verbs.contains(v) => self.named_verbs.push(*v),
             _ => {}
         }
@@ -1319,8 +1332,14 @@ mod tests {
         assert!(!g.contradicts_taken("fridge is CLOSED") && !g.contradicts_taken("TOUCH"));
         // An object is in one place: once it is to be in the fridge, not on the counter.
         assert!(!g.contradicts_taken("apple is ON to kitchencounter"));
+        // Held first, then put in the fridge: no longer kept in hand, nor to be held again.
+        assert!(!g.contradicts_taken("character is HOLDS_RH to apple"));
+        g.take("character is HOLDS_RH to apple");
+        assert!(g.kept.contains(&Fact::Edge { from: w.character(), relation: Relation::HoldsRh, to: 12 }));
         g.take("apple is INSIDE to fridge");
         assert!(g.contradicts_taken("apple is ON to kitchencounter") && !g.contradicts_taken("apple is INSIDE to fridge"));
+        assert!(!g.kept.iter().any(|k| matches!(k, Fact::Edge { relation: Relation::HoldsRh, .. })), "{:?}", g.kept);
+        assert!(g.contradicts_taken("character is HOLDS_RH to apple"));
         assert_eq!(g.named_verbs, [Verb::Touch]);
     }
 }

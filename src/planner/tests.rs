@@ -1390,6 +1390,22 @@ fn going_into_a_room_is_not_all_of_words_that_name_a_thing_there() {
     assert!(plan.len() > 1 && plan[1..].iter().any(|a| a.contains("<sofa>")), "{plan:?}");
 }
 
+#[test]
+fn a_fact_line_no_step_can_make_true_ends_without_a_step() {
+    // The milk is kept in the right hand: no step puts the apple there, so below "character is
+    // HOLDS_RH to apple" nothing is offered and the line ends (any step was offered before).
+    let mut m = Scripted::new(&["done"]);
+    let (milk, apple) = ("subgoal: character is HOLDS_RH to milk", "subgoal: character is HOLDS_RH to apple");
+    m.preferences = [milk, apple, "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("pick up the milk and the apple", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert!(out.tree.nodes().any(|n| n.text == "character is HOLDS_RH to apple"), "{:?}", m.scored);
+    assert_eq!(plan_lines(&out), ["[WALK] <milk> (13)", "[GRAB] <milk> (13)"]);
+    assert!(!m.grammars.iter().any(|g| g.contains('[')), "{:?}", m.grammars);
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
