@@ -171,9 +171,7 @@ impl Run<'_> {
         let unsaid = |g: &Vec<String>| !g.iter().any(|l| st.tried.contains(l)) && g.iter().any(|l| subgoal_menu.contains(l));
         let allow_done = if inferring {
             let arrived_only = self.goals.only_arrived(self.world()?, &st.tried, &subgoal_menu);
-            !st.tried.is_empty()
-                && !self.goals.said.iter().any(unsaid)
-                && !arrived_only
+            !st.tried.is_empty() && !self.goals.said.iter().any(unsaid) && !arrived_only
         } else {
             !(target.is_some() && self.cfg.target_steps)
                 && !(offered && allow_subgoal)
@@ -354,9 +352,10 @@ impl Run<'_> {
     }
 
     /// Below a goal line the model set itself (`infer_goals`): only the steps and targets that
-    /// make the line true (its fact holds after them, a target's way included) or run its verb,
-    /// when there are any. The line is the model's own subgoal; the world knows which steps
-    /// achieve it (SmolLM2 put the apple ON the fridge under "apple is INSIDE to fridge").
+    /// make the line true (its fact holds after them, a target's way included), none where no
+    /// step can (the line ends), or those that run its verb. The line is the model's own
+    /// subgoal; the world knows which steps achieve it (SmolLM2 put the apple ON the fridge under
+    /// "apple is INSIDE to fridge").
     /// Below a shown line that names actions ("POUR", "READ or LOOKAT"), only those actions, read
     /// from the line's words: a step of another verb is not congruent with it (SmolLM2 wrote
     /// PUTBACK under "POUR" in every "Make coffee"). A shown line's fact is never worked out in
