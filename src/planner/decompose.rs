@@ -404,11 +404,32 @@ impl Run<'_> {
             Some(goals::Meaning::Fact(f)) => {
                 let making: Vec<Action> =
                     list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect();
-                // With no step that makes it true (it would undo a line kept, or a hand is full),
-                // none, and the line ends: any step was offered before, and SmolLM2 switched on
-                // the phone it was to put on the desk.
+                // With no step that makes it true, none, and the line ends (any step was offered
+                // before, and SmolLM2 switched on the phone it was to put on the desk); but a
+                // hand the line names that holds something else is emptied first (the world's
+                // way to a grab never puts a thing down): the steps that put that thing down.
                 if making.is_empty() {
-                    return Ok(ActionSet::Exact(Vec::new()));
+                    let robot = w.character();
+                    let emptying = |hand: Relation, x: u32| -> Vec<Action> {
+                        let Some(other) = w.edges().into_iter().find(|&(f, r, t)| f == robot && r == hand && t != x).map(|e| e.2) else {
+                            return Vec::new();
+                        };
+                        let held = Fact::Edge { from: robot, relation: hand, to: other };
+                        // (the thing held may be outside the line's objects: its own steps too,
+                        // where they undo no line kept)
+                        let own = w.feasible_actions_among(&[other]).into_iter().filter(|a| {
+                            !self.cfg.excluded_verbs.contains(&a.verb)
+                                && !list.contains(a)
+                                && trial(w, a).is_some_and(|after| !(self.keeps_goals() && makes_false(w, &after, &self.goals.kept)))
+                        });
+                        let mut steps: Vec<Action> = list.iter().cloned().chain(own).collect();
+                        steps.retain(|a| outcome(w, a, targets).is_some_and(|after| !after.holds(&held)));
+                        steps
+                    };
+                    return Ok(ActionSet::Exact(match *f {
+                        Fact::Edge { from, relation: hand @ (Relation::HoldsRh | Relation::HoldsLh), to } if from == robot => emptying(hand, to),
+                        _ => Vec::new(),
+                    }));
                 }
                 // A line about the robot alone ("character is SITTING") came of an action on an
                 // object the instruction names: made true there, where it can be (SmolLM2 sat

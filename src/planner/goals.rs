@@ -504,8 +504,11 @@ impl Wording {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
         }
         // What the words put somewhere keeps the states no verb they say of it sets ("put the
-        // phone on the desk": SmolLM2 read "phone is ON" for it and switched the phone on).
-        for &(x, _, _) in &self.relations {
+        // phone on the desk": SmolLM2 read "phone is ON" for it and switched the phone on). Only
+        // a thing that can be carried is put anywhere: "a computer in the home office" says where
+        // the computer is.
+        let carried = |x: u32| w.node(x).is_some_and(|n| n.properties.contains(Property::Grabbable));
+        for &(x, _, _) in self.relations.iter().filter(|(x, _, to)| carried(*x) && !w.node(*to).is_some_and(|n| n.is_room())) {
             let verbs = self.verbs_of(x);
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
         }

@@ -1406,6 +1406,23 @@ fn a_fact_line_no_step_can_make_true_ends_without_a_step() {
     assert!(!m.grammars.iter().any(|g| g.contains('[')), "{:?}", m.grammars);
 }
 
+#[test]
+fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
+    // READ took the book in the right hand; "character is HOLDS_RH to apple" then has no step
+    // that makes it true (a grab fills the left hand), so the steps that put the book down are
+    // offered, and then the grab.
+    let mut m = Scripted::new(&["action: [DROP] <book> (34)", "action: [GRAB] <apple> (12)"]);
+    m.preferences = ["subgoal: READ", "subgoal: character is HOLDS_RH to apple", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("read the book and pick up the apple", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    let plan = plan_lines(&out);
+    assert_eq!(plan[plan.len() - 3..], ["[DROP] <book> (34)", "[WALK] <apple> (12)", "[GRAB] <apple> (12)"], "{plan:?}");
+    let below = &m.grammars[m.grammars.len() - 2];
+    assert!(below.contains("[DROP]") && !below.contains("[GRAB]") && !below.contains("[SIT]"), "{below}");
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
