@@ -1183,6 +1183,8 @@ mod tests {
         assert!(has(&lines(&[32, 33], "put the remote control on the coffee table", false), "remote_control is ON"));
         let on = lines(&[32, 33], "put the remote control on the coffee table and switch on the remote control", true);
         assert!(has(&on, "remote_control is ON"), "{on:?}");
+        // What cannot be carried is not put anywhere: the words say where it is.
+        assert!(has(&lines(&[31, 33], "watch the television on the coffee table", true), "television is ON"));
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
