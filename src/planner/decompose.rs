@@ -410,6 +410,24 @@ impl Run<'_> {
                 // way to a grab never puts a thing down): the steps that put that thing down.
                 if making.is_empty() {
                     let robot = w.character();
+                    // (first, the first step of the world's way to a step that makes it true,
+                    // where that step waits for one: STANDUP before the walk into the bedroom)
+                    let ids: Vec<u32> = match *f {
+                        Fact::Edge { from, to, .. } => vec![from, to],
+                        Fact::State { id, .. } => vec![id],
+                        Fact::Holds { from, to } => std::iter::once(from).chain(to).collect(),
+                    };
+                    let ids: Vec<u32> = ids.into_iter().filter(|&id| id != robot).collect();
+                    let mut first: Vec<Action> = Vec::new();
+                    for a in typed_actions(w, &ids) {
+                        let Some((way, before)) = w.way_to(&a) else { continue };
+                        if way.iter().all(|s| self.in_focus(s)) && trial(&before, &a).is_some_and(|after| after.holds(f)) {
+                            first.extend(way.into_iter().next().filter(|s| list.contains(s) && !first.contains(s)));
+                        }
+                    }
+                    if !first.is_empty() {
+                        return Ok(ActionSet::Exact(first));
+                    }
                     let emptying = |hand: Relation, x: u32| -> Vec<Action> {
                         let Some(other) = w.edges().into_iter().find(|&(f, r, t)| f == robot && r == hand && t != x).map(|e| e.2) else {
                             return Vec::new();

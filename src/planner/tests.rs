@@ -1423,6 +1423,27 @@ fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     assert!(below.contains("[DROP]") && !below.contains("[GRAB]") && !below.contains("[SIT]"), "{below}");
 }
 
+#[test]
+fn a_fact_line_whose_step_waits_for_another_offers_that_first() {
+    // Seated on the chair, the robot cannot walk into the living room now: below "character is
+    // INSIDE to living_room" the world's way to the walk begins with STANDUP, and only that is
+    // offered (with no step offered the line would end unmet).
+    let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
+    let robot = g["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["id"] == 3).unwrap();
+    robot["states"] = serde_json::json!(["SITTING"]);
+    g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 3, "relation_type": "ON", "to_id": 19}));
+    let w = World::from_json(&g.to_string(), "test").unwrap();
+    let mut m = Scripted::new(&["action: [WALK] <living_room> (2)"]);
+    m.preferences = ["subgoal: character is INSIDE to living_room", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("go into the living room", vec![]);
+    let out = plan(&mut m, &mut SimEnv::new(w, vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert_eq!(plan_lines(&out), ["[STANDUP]", "[WALK] <living_room> (2)"]);
+    // (STANDUP alone asked no model; the walk was chosen among the ways in)
+    assert_eq!(m.grammars.len(), 1, "{:?}", m.grammars);
+}
+
 /// Scores each answer from a table, one for prompts that give the instruction and one for those
 /// that leave it out (`PlannerConfig::calibrate_lines`); writes nothing.
 struct TwoTables {
