@@ -404,50 +404,11 @@ impl Run<'_> {
             Some(goals::Meaning::Fact(f)) => {
                 let making: Vec<Action> =
                     list.iter().filter(|a| outcome(w, a, targets).is_some_and(|after| after.holds(f))).cloned().collect();
-                // With no step that makes it true, none, and the line ends (any step was offered
-                // before, and SmolLM2 switched on the phone it was to put on the desk); but a
-                // hand the line names that holds something else is emptied first (the world's
-                // way to a grab never puts a thing down): the steps that put that thing down.
+                // With no step that makes it true now, the way in, else none and the line ends
+                // (any step was offered before: SmolLM2 switched on the phone it was to put on
+                // the desk).
                 if making.is_empty() {
-                    let robot = w.character();
-                    // (first, the first step of the world's way to a step that makes it true,
-                    // where that step waits for one: STANDUP before the walk into the bedroom)
-                    let ids: Vec<u32> = match *f {
-                        Fact::Edge { from, to, .. } => vec![from, to],
-                        Fact::State { id, .. } => vec![id],
-                        Fact::Holds { from, to } => std::iter::once(from).chain(to).collect(),
-                    };
-                    let ids: Vec<u32> = ids.into_iter().filter(|&id| id != robot).collect();
-                    let mut first: Vec<Action> = Vec::new();
-                    for a in typed_actions(w, &ids) {
-                        let Some((way, before)) = w.way_to(&a) else { continue };
-                        if way.iter().all(|s| self.in_focus(s)) && trial(&before, &a).is_some_and(|after| after.holds(f)) {
-                            first.extend(way.into_iter().next().filter(|s| list.contains(s) && !first.contains(s)));
-                        }
-                    }
-                    if !first.is_empty() {
-                        return Ok(ActionSet::Exact(first));
-                    }
-                    let emptying = |hand: Relation, x: u32| -> Vec<Action> {
-                        let Some(other) = w.edges().into_iter().find(|&(f, r, t)| f == robot && r == hand && t != x).map(|e| e.2) else {
-                            return Vec::new();
-                        };
-                        let held = Fact::Edge { from: robot, relation: hand, to: other };
-                        // (the thing held may be outside the line's objects: its own steps too,
-                        // where they undo no line kept)
-                        let own = w.feasible_actions_among(&[other]).into_iter().filter(|a| {
-                            !self.cfg.excluded_verbs.contains(&a.verb)
-                                && !list.contains(a)
-                                && trial(w, a).is_some_and(|after| !(self.keeps_goals() && makes_false(w, &after, &self.goals.kept)))
-                        });
-                        let mut steps: Vec<Action> = list.iter().cloned().chain(own).collect();
-                        steps.retain(|a| outcome(w, a, targets).is_some_and(|after| !after.holds(&held)));
-                        steps
-                    };
-                    return Ok(ActionSet::Exact(match *f {
-                        Fact::Edge { from, relation: hand @ (Relation::HoldsRh | Relation::HoldsLh), to } if from == robot => emptying(hand, to),
-                        _ => Vec::new(),
-                    }));
+                    return Ok(ActionSet::Exact(self.way_in(w, f, &list, targets)));
                 }
                 // A line about the robot alone ("character is SITTING") came of an action on an
                 // object the instruction names: made true there, where it can be (SmolLM2 sat
@@ -464,6 +425,47 @@ impl Run<'_> {
             }
         };
         Ok(ActionSet::Exact(if achieving.is_empty() { list } else { achieving }))
+    }
+
+    /// The steps toward a fact line that no step of `list` makes true now: the first step of the
+    /// world's way to a step that does (STANDUP before the walk into the bedroom); else, for a
+    /// hold line whose hand holds something else, the steps that put that thing down (the
+    /// world's way to a grab never empties a hand; the thing held may be outside the line's
+    /// objects, so its own steps too, where they undo no line kept); else none.
+    fn way_in(&self, w: &World, f: &Fact, list: &[Action], targets: &[Action]) -> Vec<Action> {
+        let robot = w.character();
+        let ids: Vec<u32> = match *f {
+            Fact::Edge { from, to, .. } => vec![from, to],
+            Fact::State { id, .. } => vec![id],
+            Fact::Holds { from, to } => std::iter::once(from).chain(to).collect(),
+        };
+        let ids: Vec<u32> = ids.into_iter().filter(|&id| id != robot).collect();
+        let mut first: Vec<Action> = Vec::new();
+        for a in typed_actions(w, &ids) {
+            let Some((way, before)) = w.way_to(&a) else { continue };
+            if way.iter().all(|s| self.in_focus(s)) && trial(&before, &a).is_some_and(|after| after.holds(f)) {
+                first.extend(way.into_iter().next().filter(|s| list.contains(s) && !first.contains(s)));
+            }
+        }
+        if !first.is_empty() {
+            return first;
+        }
+        let Fact::Edge { from, relation: hand @ (Relation::HoldsRh | Relation::HoldsLh), to: x } = *f else { return Vec::new() };
+        if from != robot {
+            return Vec::new();
+        }
+        let Some(other) = w.edges().into_iter().find(|&(by, r, t)| by == robot && r == hand && t != x).map(|e| e.2) else {
+            return Vec::new();
+        };
+        let held = Fact::Edge { from: robot, relation: hand, to: other };
+        let own = w.feasible_actions_among(&[other]).into_iter().filter(|a| {
+            !self.cfg.excluded_verbs.contains(&a.verb)
+                && !list.contains(a)
+                && trial(w, a).is_some_and(|after| !(self.keeps_goals() && makes_false(w, &after, &self.goals.kept)))
+        });
+        let mut steps: Vec<Action> = list.iter().cloned().chain(own).collect();
+        steps.retain(|a| outcome(w, a, targets).is_some_and(|after| !after.holds(&held)));
+        steps
     }
 
     /// Whether the model is done at `node` by its own probability of `done` as its answer's first
