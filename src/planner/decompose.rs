@@ -391,12 +391,7 @@ impl Run<'_> {
                     // all was offered before: SmolLM2 sat on six seats in turn under "DRINK".
                     let aims = typed_actions(w, named).into_iter().filter(|a| a.verb == *v).collect();
                     let aims = narrowed(aims, said_of);
-                    let mut first: Vec<Action> = Vec::new();
-                    for a in &aims {
-                        let way = w.way_to(a).map(|(way, _)| way).filter(|way| way.iter().all(|s| self.in_focus(s)));
-                        first.extend(way.and_then(|way| way.into_iter().next()).filter(|s| list.contains(s) && !first.contains(s)));
-                    }
-                    return Ok(ActionSet::Exact(first));
+                    return Ok(ActionSet::Exact(self.first_steps(w, aims, &list, |_, _| true)));
                 } else {
                     narrowed(narrowed(doing, on_named), said_of)
                 }
@@ -427,6 +422,20 @@ impl Run<'_> {
         Ok(ActionSet::Exact(if achieving.is_empty() { list } else { achieving }))
     }
 
+    /// The first step of the world's way to each of `aims` that `ok` takes (given the world the
+    /// way leaves before the aim), where the way stays in the focus and that step is offered in
+    /// `list`; each step once.
+    fn first_steps(&self, w: &World, aims: Vec<Action>, list: &[Action], ok: impl Fn(&World, &Action) -> bool) -> Vec<Action> {
+        let mut first: Vec<Action> = Vec::new();
+        for a in aims {
+            let Some((way, before)) = w.way_to(&a) else { continue };
+            if way.iter().all(|s| self.in_focus(s)) && ok(&before, &a) {
+                first.extend(way.into_iter().next().filter(|s| list.contains(s) && !first.contains(s)));
+            }
+        }
+        first
+    }
+
     /// The steps toward a fact line that no step of `list` makes true now: the first step of the
     /// world's way to a step that does (STANDUP before the walk into the bedroom); else, for a
     /// hold line whose hand holds something else, the steps that put that thing down (the
@@ -440,13 +449,8 @@ impl Run<'_> {
             Fact::Holds { from, to } => std::iter::once(from).chain(to).collect(),
         };
         let ids: Vec<u32> = ids.into_iter().filter(|&id| id != robot).collect();
-        let mut first: Vec<Action> = Vec::new();
-        for a in typed_actions(w, &ids) {
-            let Some((way, before)) = w.way_to(&a) else { continue };
-            if way.iter().all(|s| self.in_focus(s)) && trial(&before, &a).is_some_and(|after| after.holds(f)) {
-                first.extend(way.into_iter().next().filter(|s| list.contains(s) && !first.contains(s)));
-            }
-        }
+        let makes = |before: &World, a: &Action| trial(before, a).is_some_and(|after| after.holds(f));
+        let first = self.first_steps(w, typed_actions(w, &ids), list, makes);
         if !first.is_empty() {
             return first;
         }
