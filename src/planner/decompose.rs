@@ -123,7 +123,7 @@ impl Run<'_> {
         }
         let subgoal_menu: Vec<String> = if offered {
             // (a line that contradicts one the root set itself is no longer offered)
-            // (nor, yet, a left hand's hold line that waits for the right hand's)
+            // (nor, yet, a left hand's hold line that waits for the right hand's, shown or inferred)
             // (nor, where the root sets its own goals, a state that holds now: a goal is a change
             // to bring about; "fridge is CLOSED" is offered again once a step has opened it)
             let holds = |l: &String| match self.goals.meaning(l) {
@@ -134,6 +134,7 @@ impl Run<'_> {
                 .lines
                 .iter()
                 .filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l) && !self.waits_for_its_hand(l, &st.tried))
+                .filter(|l| !self.goals.waits_for_the_right_hand(l, &st.tried))
                 .filter(|l| !(self.cfg.skip_held_lines && holds(l)))
                 .cloned()
                 .collect()

@@ -98,11 +98,31 @@ impl Goals {
             }
             // (a thing put somewhere is not to be held again: SmolLM2 took "character is HOLDS_RH
             // to phone" after the phone was on the desk, and no step could keep both)
-            Some(Meaning::Fact(Fact::Edge { from, relation: Relation::HoldsRh | Relation::HoldsLh, to })) if Some(*from) == self.robot => {
-                self.kept.iter().any(|k| matches!(k, Fact::Edge { from: f, relation: r, .. } if f == to && placed(r)))
+            // (a hand holds one thing, and a thing is in one hand: "pick up the milk and the
+            // apple", the apple in the right hand, then the milk in the right hand too left the
+            // milk behind)
+            Some(Meaning::Fact(Fact::Edge { from, relation: hand @ (Relation::HoldsRh | Relation::HoldsLh), to })) if Some(*from) == self.robot => {
+                let in_hand = |r: &Relation| matches!(r, Relation::HoldsRh | Relation::HoldsLh);
+                self.kept.iter().any(|k| match k {
+                    Fact::Edge { from: f, relation: r, .. } if f == to && placed(r) => true,
+                    Fact::Edge { from: f, relation: r, to: t } if f == from && in_hand(r) => (r == hand) != (t == to),
+                    _ => false,
+                })
             }
             _ => false,
         }
+    }
+
+    /// Whether an inferred left hand's hold line waits for its right hand's twin: the right hand
+    /// takes a thing first (GRAB fills it first), so the left hand's line is offered only once
+    /// the right hand's for the same thing is not (taken, or its hand kept holding another thing).
+    pub fn waits_for_the_right_hand(&self, line: &str, tried: &[String]) -> bool {
+        let Some(Meaning::Fact(Fact::Edge { from, relation: Relation::HoldsLh, to })) = self.meaning(line) else { return false };
+        let right = Meaning::Fact(Fact::Edge { from: *from, relation: Relation::HoldsRh, to: *to });
+        self.lines
+            .iter()
+            .zip(&self.meanings)
+            .any(|(l, m)| *m == right && !tried.contains(l) && !self.contradicts_taken(l))
     }
 
     /// Whether the inferred lines `taken` so far only put the robot in a room while `menu` still
@@ -286,7 +306,16 @@ pub fn candidates(
                     robot_lines.push((line.clone(), a.verb));
                 }
                 made_by.push((line.clone(), a.verb));
-                push(line, Meaning::Fact(f));
+                push(line, Meaning::Fact(f.clone()));
+                // What the right hand can take, the left can hold too (grabbed second): the line
+                // for a second thing while the first is kept in the right hand (see
+                // `Goals::waits_for_the_right_hand`).
+                if let Fact::Edge { from, relation: Relation::HoldsRh, to } = f {
+                    let left = Fact::Edge { from, relation: Relation::HoldsLh, to };
+                    let line = w.describe(&left);
+                    made_by.push((line.clone(), a.verb));
+                    push(line, Meaning::Fact(left));
+                }
             }
         }
     }
@@ -379,6 +408,12 @@ impl Wording {
         }
         found.sort_by_key(|(k, _, _)| *k);
         let only = |between: &[String], allowed: &dyn Fn(&str) -> bool| between.iter().all(|x| allowed(x));
+        // Objects in a list ("the phone and the kiwi on the TV stand", "the bread, the apple and
+        // the knife": commas are not words), each a thing said.
+        let joined = |x: &(usize, usize, Vec<u32>), y: &(usize, usize, Vec<u32>)| {
+            let between = &words[x.1..y.0.max(x.1)];
+            !between.is_empty() && only(between, &|w| w == "and" || DETERMINERS.contains(&w))
+        };
         let mut said: Vec<(u32, Verb)> = Vec::new();
         let mut said_once: Vec<Vec<(u32, Verb)>> = Vec::new();
         let mut verb_words: Vec<Vec<Verb>> = Vec::new();
@@ -388,7 +423,8 @@ impl Wording {
             if !verbs.is_empty() {
                 verb_words.push(verbs.clone());
             }
-            let Some((j, after, ids)) = found.iter().find(|(j, _, _)| *j >= end) else { continue };
+            let Some(first) = found.iter().position(|(j, _, _)| *j >= end) else { continue };
+            let (j, after, _) = &found[first];
             // A phrase whose particle comes after the object ("switch it on", "turn the TV off").
             for (phrase, of) in VERB_PHRASES.iter().filter(|(p, _)| p.len() == 2 && PARTICLES.contains(&p[1])) {
                 let first = words[k] == phrase[0] || (phrase[0].len() >= 4 && words[k].starts_with(phrase[0]));
@@ -400,10 +436,18 @@ impl Wording {
             if verbs.is_empty() || !only(&words[end..*j], &|x| DETERMINERS.contains(&x) || PARTICLES.contains(&x)) {
                 continue;
             }
-            for &id in ids {
-                said.extend(verbs.iter().map(|&v| (id, v)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
+            // The verb is said of each thing of a list that begins there ("pick up the milk and
+            // the apple"), each a thing said.
+            let mut last = first;
+            while found.get(last + 1).is_some_and(|next| joined(&found[last], next)) {
+                last += 1;
             }
-            said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
+            for (_, _, ids) in &found[first..=last] {
+                for &id in ids {
+                    said.extend(verbs.iter().map(|&v| (id, v)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
+                }
+                said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
+            }
         }
         // The relation the words say between each object named and the next ("A in B", "A on B").
         let relation_between = |(_, i, _): &(usize, usize, Vec<u32>), (j, _, _): &(usize, usize, Vec<u32>)| {
@@ -421,12 +465,6 @@ impl Wording {
             }
         };
         let next_relation: Vec<Option<Relation>> = found.windows(2).map(|p| relation_between(&p[0], &p[1])).collect();
-        // Objects in a list ("the phone and the kiwi on the TV stand", "the bread, the apple and
-        // the knife": commas are not words), each a thing said.
-        let joined = |x: &(usize, usize, Vec<u32>), y: &(usize, usize, Vec<u32>)| {
-            let between = &words[x.1..y.0.max(x.1)];
-            !between.is_empty() && only(between, &|w| w == "and" || DETERMINERS.contains(&w))
-        };
         let mut relations = Vec::new();
         let mut relations_once = Vec::new();
         for (p, relation) in next_relation.iter().enumerate() {
@@ -1112,6 +1150,12 @@ mod tests {
         assert_eq!(of("open the fridge").said, [(10, Verb::Open)]);
         // Phrases for verbs of other names.
         assert_eq!(of("pick up the knife").said, [(24, Verb::Grab)]);
+        // A verb before a list is said of each thing of it, each a thing said; a list ends at a
+        // word that is not "and" or an article.
+        let list = of("pick up the milk and the apple");
+        assert_eq!(list.said, [(13, Verb::Grab), (12, Verb::Grab)]);
+        assert_eq!(list.said_once.len(), 2);
+        assert_eq!(of("open the fridge and put the apple in it").said, [(10, Verb::Open)]);
         assert_eq!(of("Turn on the TV").said, [(31, Verb::SwitchOn)]);
         assert_eq!(of("switching off the faucet").said, [(21, Verb::SwitchOff)]);
         assert_eq!(of("turn the TV on").said, [(31, Verb::SwitchOn)]);
@@ -1326,7 +1370,7 @@ mod tests {
     #[test]
     fn a_taken_inferred_line_keeps_its_fact_or_names_its_verb() {
         let w = World::demo();
-        let mut g = Goals::inferred(&w, candidates(&w, &[12, 10, 11], &[], Some("touch the fridge"), &[], None).0, Vec::new(), Vec::new(), Wording::default());
+        let mut g = Goals::inferred(&w, candidates(&w, &[12, 10, 11, 13], &[], Some("touch the fridge"), &[], None).0, Vec::new(), Vec::new(), Wording::default());
         assert!(g.kept.is_empty() && g.named_verbs.is_empty());
         g.take("fridge is CLOSED");
         g.take("TOUCH");
@@ -1339,8 +1383,20 @@ mod tests {
         assert!(!g.contradicts_taken("apple is ON to kitchencounter"));
         // Held first, then put in the fridge: no longer kept in hand, nor to be held again.
         assert!(!g.contradicts_taken("character is HOLDS_RH to apple"));
+        // What the right hand can take the left can hold; its line waits while the right
+        // hand's twin is offered and not taken.
+        let left_milk = "character is HOLDS_LH to milk";
+        assert!(g.lines.iter().any(|l| l == left_milk), "{:?}", g.lines);
+        assert!(g.waits_for_the_right_hand(left_milk, &[]));
+        assert!(!g.waits_for_the_right_hand(left_milk, &["character is HOLDS_RH to milk".to_string()]));
         g.take("character is HOLDS_RH to apple");
         assert!(g.kept.contains(&Fact::Edge { from: w.character(), relation: Relation::HoldsRh, to: 12 }));
+        // A hand holds one thing, and a thing is in one hand: the milk is then for the other
+        // hand, the apple for no other.
+        assert!(g.contradicts_taken("character is HOLDS_RH to milk") && !g.contradicts_taken("character is HOLDS_LH to milk"));
+        assert!(g.contradicts_taken("character is HOLDS_LH to apple") && !g.contradicts_taken("character is HOLDS_RH to apple"));
+        // ... and its left hand's line no longer waits for the right hand's.
+        assert!(!g.waits_for_the_right_hand("character is HOLDS_LH to milk", &[]));
         g.take("apple is INSIDE to fridge");
         assert!(g.contradicts_taken("apple is ON to kitchencounter") && !g.contradicts_taken("apple is INSIDE to fridge"));
         assert!(!g.kept.iter().any(|k| matches!(k, Fact::Edge { relation: Relation::HoldsRh, .. })), "{:?}", g.kept);

@@ -331,7 +331,7 @@ impl Default for PlannerConfig {
             random_seed: 0,
             random_actions: 30,
             random_steps: 10,
-            random_lines: 2,
+            random_lines: 4,
             subgoal_focus: true,
             goal_subgoals: true,
             target_subgoals: true,

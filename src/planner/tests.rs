@@ -1392,18 +1392,39 @@ fn going_into_a_room_is_not_all_of_words_that_name_a_thing_there() {
 
 #[test]
 fn a_fact_line_no_step_can_make_true_ends_without_a_step() {
-    // The milk is kept in the right hand: no step puts the apple there, so below "character is
-    // HOLDS_RH to apple" nothing is offered and the line ends (any step was offered before).
+    // The milk and the bread are kept in the two hands: no step puts the apple on the table
+    // (it cannot be picked up), so below that line nothing is offered and the line ends (any
+    // step was offered before).
     let mut m = Scripted::new(&["done"]);
-    let (milk, apple) = ("subgoal: character is HOLDS_RH to milk", "subgoal: character is HOLDS_RH to apple");
-    m.preferences = [milk, apple, "done"].iter().map(|s| s.to_string()).collect();
+    let (milk, bread) = ("subgoal: character is HOLDS_RH to milk", "subgoal: character is HOLDS_LH to bread");
+    let apple = "subgoal: apple is ON to kitchentable";
+    m.preferences = [milk, bread, apple, "done"].iter().map(|s| s.to_string()).collect();
     let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let req = PlanRequest::new("pick up the milk and the apple", vec![]);
+    let req = PlanRequest::new("pick up the milk and the bread, and put the apple on the kitchen table", vec![]);
     let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
     assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
-    assert!(out.tree.nodes().any(|n| n.text == "character is HOLDS_RH to apple"), "{:?}", m.scored);
-    assert_eq!(plan_lines(&out), ["[WALK] <milk> (13)", "[GRAB] <milk> (13)"]);
+    assert!(out.tree.nodes().any(|n| n.text == "apple is ON to kitchentable"), "{:?}", m.scored);
+    assert_eq!(plan_lines(&out), ["[WALK] <milk> (13)", "[GRAB] <milk> (13)", "[GRAB] <bread> (14)"]);
     assert!(!m.grammars.iter().any(|g| g.contains('[')), "{:?}", m.grammars);
+}
+
+#[test]
+fn two_things_to_pick_up_are_held_one_in_each_hand() {
+    // "pick up the milk and the apple": the apple taken into the right hand first, the milk's
+    // right-hand line is no longer offered (it would drop the apple) and its left-hand line is;
+    // no left-hand line is offered before.
+    use crate::world::vocab::Relation;
+    let mut m = Scripted::new(&["done"]);
+    let prefer = ["subgoal: character is HOLDS_RH to apple", "subgoal: character is HOLDS_RH to milk", "subgoal: character is HOLDS_LH to milk", "done"];
+    m.preferences = prefer.iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("pick up the milk and the apple", vec![]);
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.scored);
+    assert!(!m.scored[0].iter().any(|a| a.contains("HOLDS_LH")), "{:?}", m.scored);
+    let held = env.world().map(|w| w.held()).unwrap_or_default();
+    assert_eq!(held, [(Relation::HoldsRh, 12), (Relation::HoldsLh, 13)], "{:?} {:?}", plan_lines(&out), m.scored);
 }
 
 #[test]
