@@ -218,6 +218,16 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
                 if let Some(why) = v["why"].as_str() {
                     eprintln!("  [no goal lines: {why}]");
                 }
+                // What the words say, one thing a group: a line of each is taken before `done`.
+                let said: Vec<String> = v["said"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .map(|g| g.as_array().into_iter().flatten().filter_map(Value::as_str).collect::<Vec<_>>().join(" or "))
+                    .collect();
+                if !said.is_empty() {
+                    eprintln!("  [the words say: {}]", said.join("; "));
+                }
             }
             "warm" => match (v["error"].as_str(), serde_json::from_value::<Warm>(v.clone())) {
                 (Some(e), _) => eprintln!("  [system message not prepared ahead: {e}]"),

@@ -125,22 +125,29 @@ impl Goals {
             .any(|(l, m)| *m == right && !tried.contains(l) && !self.contradicts_taken(l))
     }
 
-    /// Whether the inferred lines `taken` so far only put the robot in a room while `menu` still
-    /// offers a line about something else: walking into a room is on the way to what the words
-    /// name there ("go to the toilet": into the bathroom first), not all of it.
+    /// Whether the inferred lines `taken` so far only put the robot in a room or close to things
+    /// while `menu` still offers a line about something else: walking into a room is on the way
+    /// to what the words name there ("go to the toilet": into the bathroom first), not all of it,
+    /// and so is walking up to a thing ("walk to the sofa and sit down").
     pub fn only_arrived(&self, w: &World, taken: &[String], menu: &[String]) -> bool {
-        let arriving = |l: &String| {
-            matches!(self.meaning(l), Some(Meaning::Fact(Fact::Edge { from, relation: Relation::Inside, to }))
-                if Some(*from) == self.robot && w.node(*to).is_some_and(|n| n.is_room()))
+        let arriving = |l: &String| match self.meaning(l) {
+            Some(Meaning::Fact(Fact::Edge { from, relation: Relation::Inside, to })) => {
+                Some(*from) == self.robot && w.node(*to).is_some_and(|n| n.is_room())
+            }
+            Some(Meaning::Fact(Fact::Edge { from, relation: Relation::Close, .. })) => Some(*from) == self.robot,
+            _ => false,
         };
         taken.iter().all(arriving) && menu.iter().any(|l| !arriving(l))
     }
 
     /// The root took `line`: an inferred line's fact is kept from now on, or its verb named. A
-    /// thing put somewhere is no longer kept in hand: holding it was the way there.
+    /// thing put somewhere is no longer kept in hand: holding it was the way there. Being close
+    /// to a thing is not kept: the next walk leaves it ("walk to the faucet, then open the
+    /// fridge").
     pub fn take(&mut self, line: &str) {
         let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return };
         match &self.meanings[i] {
+            Meaning::Fact(Fact::Edge { relation: Relation::Close, .. }) => {}
             Meaning::Fact(f) if !self.kept.contains(f) => {
                 if let Fact::Edge { from: x, relation: Relation::On | Relation::Inside, .. } = *f {
                     if Some(x) != self.robot {
@@ -354,6 +361,22 @@ pub fn candidates(
             _ => false,
         };
         out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { state, .. }) if unsaid(state)));
+    }
+    // Where the words say to walk to or find a thing ("find the shower", "walk to the faucet"),
+    // being close to it is a line of that verb: closeness is no line otherwise (every walk
+    // brings some about), and facing the shower from the door met "take a shower" for SmolLM2.
+    for &(id, v) in wording.map(|words| words.said.as_slice()).unwrap_or_default() {
+        if !matches!(v, Verb::Walk | Verb::Run | Verb::Find) || excluded.contains(&v) || !objects.contains(&id) || !about_named(&[id]) {
+            continue;
+        }
+        let f = Fact::Edge { from: robot, relation: Relation::Close, to: id };
+        let line = w.describe(&f);
+        made_by.push((line.clone(), v));
+        match out.iter_mut().find(|(l, _)| *l == line) {
+            None => out.push((line, Meaning::Fact(f))),
+            Some((_, old)) if holds(old) && !w.holds(&f) => *old = Meaning::Fact(f),
+            Some(_) => {}
+        }
     }
     let said = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
     (out, said)
@@ -1232,6 +1255,28 @@ mod tests {
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
+    }
+
+    #[test]
+    fn a_thing_the_words_say_to_walk_to_or_find_is_a_line_of_being_close_to_it() {
+        let w = World::demo();
+        let goals = |focus: &[u32], t: &str| {
+            let words = Wording::of(&w, focus, t);
+            let (lines, said) = candidates(&w, focus, &[], Some(t), focus, Some(&words));
+            Goals::inferred(&w, lines, said, focus.to_vec(), words)
+        };
+        let close = "character is CLOSE to faucet".to_string();
+        let mut g = goals(&[21, 10], "walk to the faucet, then open the fridge");
+        assert!(g.said.contains(&vec![close.clone()]), "{:?}", g.said);
+        // Found, as walked to; named with no such verb, closeness is no line.
+        assert!(goals(&[30], "find the sofa").lines.contains(&"character is CLOSE to sofa".to_string()));
+        let plain = goals(&[21, 10], "switch on the faucet").lines;
+        assert!(!plain.iter().any(|l| l.contains("is CLOSE to")), "{plain:?}");
+        // It is on the way (not all the words say while another line is offered), and not kept:
+        // the next walk leaves it.
+        assert!(g.only_arrived(&w, &[close.clone()], &["fridge is OPEN".to_string()]));
+        g.take(&close);
+        assert!(g.kept.is_empty(), "{:?}", g.kept);
     }
 
     #[test]

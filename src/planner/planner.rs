@@ -266,7 +266,9 @@ impl Run<'_> {
         self.goals = Goals::inferred(w, candidates, said, about, wording);
         self.prompter = self.prompter.clone().setting_goals();
         self.uninstructed = self.cfg.calibrate_lines.then(|| self.prompter.without_instruction());
-        self.trace.event("goal_candidates", json!({"lines": self.goals.lines}));
+        // (with the things the words say, a group each: the root takes a line of each before it
+        // may be done)
+        self.trace.event("goal_candidates", json!({"lines": self.goals.lines, "said": self.goals.said}));
     }
 
     /// Puts the prompts' shared beginning in the model's cache before the first call: the system
