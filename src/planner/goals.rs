@@ -50,6 +50,9 @@ pub struct Goals {
     /// The robot, for inferred lines (its placements are not an object's: it is inside a room
     /// and on the sofa at once).
     robot: Option<u32>,
+    /// For inferred lines (same order as `lines`), the same fact of the other objects a plural
+    /// name gives ("the lights": each light ON), met one after another ([`Goals::advance`]).
+    more: Vec<Vec<Fact>>,
 }
 
 impl Goals {
@@ -65,6 +68,7 @@ impl Goals {
             wording: Wording::default(),
             said: Vec::new(),
             robot: None,
+            more: Vec::new(),
         }
     }
 
@@ -77,9 +81,38 @@ impl Goals {
     /// Candidate lines for the model to choose among and the groups the words say of them (see
     /// [`candidates`]); nothing is kept yet.
     pub fn inferred(w: &World, candidates: Vec<(String, Meaning)>, said: Vec<Vec<String>>, named_objects: Vec<u32>, wording: Wording) -> Goals {
-        let (lines, meanings) = candidates.into_iter().unzip();
+        let (lines, meanings): (Vec<String>, Vec<Meaning>) = candidates.into_iter().unzip();
         let robot = Some(w.character());
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
+        // A line about one of the objects of a plural name asks the same of the others.
+        let others = |x: u32| -> Vec<u32> { wording.plural.iter().find(|ids| ids.contains(&x)).map(|ids| ids.iter().copied().filter(|&y| y != x).collect()).unwrap_or_default() };
+        let more = meanings
+            .iter()
+            .map(|m| match *m {
+                Meaning::Fact(Fact::State { id, state }) => others(id).into_iter().map(|y| Fact::State { id: y, state }).collect(),
+                Meaning::Fact(Fact::Edge { from, relation, to }) if Some(from) != robot => {
+                    others(from).into_iter().map(|y| Fact::Edge { from: y, relation, to }).collect()
+                }
+                _ => Vec::new(),
+            })
+            .collect();
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot, more }
+    }
+
+    /// Where the fact an inferred `line` now asks for holds in `w` and another of its plural
+    /// name's does not, the line asks for that one from now on (kept too, if the line was
+    /// taken); whether it does.
+    pub fn advance(&mut self, line: &str, w: &World) -> bool {
+        let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return false };
+        let Meaning::Fact(now) = &self.meanings[i] else { return false };
+        if !w.holds(now) {
+            return false;
+        }
+        let Some(next) = self.more.get(i).and_then(|m| m.iter().find(|f| !w.holds(f))).cloned() else { return false };
+        if self.kept.contains(now) {
+            self.kept.push(next.clone());
+        }
+        self.meanings[i] = Meaning::Fact(next);
+        true
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -401,6 +434,9 @@ pub struct Wording {
     /// The verbs each word of the text names (or a phrase beginning there), one entry a word that
     /// names any: what the words say is done, whatever it is done to ("Drink water", "pet the cat").
     verb_words: Vec<Vec<Verb>>,
+    /// The objects of each name the words give in the plural ("turn on the lights"): each of
+    /// them is meant, not one.
+    pub plural: Vec<Vec<u32>>,
 }
 
 impl Wording {
@@ -430,6 +466,16 @@ impl Wording {
             }
         }
         found.sort_by_key(|(k, _, _)| *k);
+        // A name whose last word is in the plural, of two or more objects of one class.
+        let plural: Vec<Vec<u32>> = found
+            .iter()
+            .filter(|(_, end, ids)| {
+                let last = &words[end - 1];
+                let classes: BTreeSet<&str> = ids.iter().filter_map(|&id| w.node(id).map(|n| n.class_name)).collect();
+                ids.len() > 1 && classes.len() == 1 && last.ends_with('s') && !classes.iter().any(|c| c.to_lowercase().ends_with(last.as_str()))
+            })
+            .map(|(_, _, ids)| ids.clone())
+            .collect();
         let only = |between: &[String], allowed: &dyn Fn(&str) -> bool| between.iter().all(|x| allowed(x));
         // Objects in a list ("the phone and the kiwi on the TV stand", "the bread, the apple and
         // the knife": commas are not words), each a thing said.
@@ -507,7 +553,7 @@ impl Wording {
                 relations_once.push(pairs);
             }
         }
-        Wording { said, relations, said_once, relations_once, verb_words }
+        Wording { said, relations, said_once, relations_once, verb_words, plural }
     }
 
     /// The verbs said of `id`.
@@ -1008,10 +1054,9 @@ mod tests {
     }
 
     /// The demo scene with `edit` made to its graph's JSON.
+    use World as W;
     fn demo_edited(edit: impl FnOnce(&mut serde_json::Value)) -> World {
-        let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
-        edit(&mut g);
-        World::from_json(&g.to_string(), "test").unwrap()
+        W::demo_edited(edit)
     }
 
     #[test]
@@ -1175,6 +1220,9 @@ mod tests {
         assert_eq!(of("pick up the knife").said, [(24, Verb::Grab)]);
         // A verb before a list is said of each thing of it, each a thing said; a list ends at a
         // word that is not "and" or an article.
+        // A name in the plural means each of its objects.
+        assert_eq!(of("turn on the lights").plural, [vec![23, 35]]);
+        assert!(of("turn on the light").plural.is_empty() && of("put the apples in the fridge").plural.is_empty());
         let list = of("pick up the milk and the apple");
         assert_eq!(list.said, [(13, Verb::Grab), (12, Verb::Grab)]);
         assert_eq!(list.said_once.len(), 2);

@@ -475,7 +475,7 @@ impl Run<'_> {
         // A line the model set itself (`infer_goals`) says what completes it: its state or relation
         // holding, or a step of its verb having run. (A shown goal line's completion stays the
         // model's `done`: the world checking the task's own goals would be an oracle.)
-        let set_line = if self.under_offered(node) { self.goals.meaning(&self.tree.node(node).text).cloned() } else { None };
+        let mut set_line = if self.under_offered(node) { self.goals.meaning(&self.tree.node(node).text).cloned() } else { None };
         let set_verb = match &set_line {
             Some(goals::Meaning::Verb(v)) => Some(*v),
             _ => None,
@@ -491,7 +491,20 @@ impl Run<'_> {
             }
             if let (Some(goals::Meaning::Fact(f)), Some(w)) = (&set_line, self.env.world()) {
                 if w.holds(f) {
-                    self.trace.event("line_holds", json!({"node": node, "line": self.tree.node(node).text}));
+                    // (a line of a plural name goes on to the next of its objects)
+                    let text = self.tree.node(node).text.clone();
+                    if self.goals.advance(&text, w) {
+                        set_line = self.goals.meaning(&text).cloned();
+                        // (nothing is done toward the next one yet: no `done` before a step)
+                        st.accepted = 0;
+                        let of = match &set_line {
+                            Some(goals::Meaning::Fact(Fact::State { id, .. } | Fact::Edge { from: id, .. })) => Some(*id),
+                            _ => None,
+                        };
+                        self.trace.event("line_next", json!({"node": node, "line": text, "object": of}));
+                        continue;
+                    }
+                    self.trace.event("line_holds", json!({"node": node, "line": text}));
                     return Ok(End::Complete);
                 }
             }

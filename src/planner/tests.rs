@@ -1428,6 +1428,33 @@ fn two_things_to_pick_up_are_held_one_in_each_hand() {
 }
 
 #[test]
+fn a_line_of_a_plural_name_is_met_for_each_of_its_objects() {
+    // "turn on the lights" with both lights off: the one line "light is ON", taken once, is met
+    // for the one light and then the other.
+    use crate::world::State;
+    let off = |g: &mut serde_json::Value| {
+        let light = g["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["id"] == 23).unwrap();
+        light["states"] = serde_json::json!(["OFF", "PLUGGED_IN", "CLEAN"]);
+    };
+    let mut m = Scripted::new(&["done"]);
+    m.preferences = ["subgoal: light is ON", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let mut env = SimEnv::new(World::demo_edited(off), vec![]);
+    let out = plan(&mut m, &mut env, &PlanRequest::new("turn on the lights", vec![]), &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.scored);
+    let w = env.world().unwrap();
+    for id in [23, 35] {
+        assert!(w.holds(&Fact::State { id, state: State::On }), "light {id}: {:?}", plan_lines(&out));
+    }
+    assert_eq!(out.tree.nodes().filter(|n| n.text == "light is ON").count(), 1);
+    // One light named: one light.
+    let mut env = SimEnv::new(World::demo_edited(off), vec![]);
+    plan(&mut m, &mut env, &PlanRequest::new("turn on the light", vec![]), &cfg, &mut TraceWriter::sink());
+    let on = [23, 35].iter().filter(|&&id| env.world().unwrap().holds(&Fact::State { id, state: State::On })).count();
+    assert_eq!(on, 1);
+}
+
+#[test]
 fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     // READ took the book in the right hand; "character is HOLDS_RH to apple" then has no step
     // that makes it true (a grab fills the left hand), so the steps that put the book down are
@@ -1449,11 +1476,11 @@ fn a_fact_line_whose_step_waits_for_another_offers_that_first() {
     // Seated on the chair, the robot cannot walk into the living room now: below "character is
     // INSIDE to living_room" the world's way to the walk begins with STANDUP, and only that is
     // offered (with no step offered the line would end unmet).
-    let mut g: serde_json::Value = serde_json::from_str(crate::world::demo::DEMO_KITCHEN_JSON).unwrap();
-    let robot = g["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["id"] == 3).unwrap();
-    robot["states"] = serde_json::json!(["SITTING"]);
-    g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 3, "relation_type": "ON", "to_id": 19}));
-    let w = World::from_json(&g.to_string(), "test").unwrap();
+    let w = World::demo_edited(|g| {
+        let robot = g["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["id"] == 3).unwrap();
+        robot["states"] = serde_json::json!(["SITTING"]);
+        g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 3, "relation_type": "ON", "to_id": 19}));
+    });
     let mut m = Scripted::new(&["action: [WALK] <living_room> (2)"]);
     m.preferences = ["subgoal: character is INSIDE to living_room", "done"].iter().map(|s| s.to_string()).collect();
     let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };

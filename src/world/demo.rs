@@ -28,6 +28,14 @@ impl World {
             Err(e) => panic!("embedded demo scene is invalid: {e}"),
         }
     }
+
+    /// The demo kitchen with `edit` applied to its JSON: tests of a state it does not have.
+    #[cfg(test)]
+    pub fn demo_edited(edit: impl FnOnce(&mut serde_json::Value)) -> World {
+        let mut g: serde_json::Value = serde_json::from_str(DEMO_KITCHEN_JSON).unwrap();
+        edit(&mut g);
+        World::from_json(&g.to_string(), "test").unwrap()
+    }
 }
 
 #[cfg(test)]
