@@ -1054,11 +1054,6 @@ mod tests {
     }
 
     /// The demo scene with `edit` made to its graph's JSON.
-    use World as W;
-    fn demo_edited(edit: impl FnOnce(&mut serde_json::Value)) -> World {
-        W::demo_edited(edit)
-    }
-
     #[test]
     fn an_instruction_names_objects_by_their_class_in_words_whole_names_first() {
         let w = World::demo();
@@ -1080,7 +1075,7 @@ mod tests {
 
     #[test]
     fn a_word_names_every_kind_its_class_names_begin_with() {
-        let w = demo_edited(|g| {
+        let w = World::demo_edited(|g| {
             for (id, class) in [(40, "washing_machine"), (41, "clothes_pants"), (42, "clothes_shirt"), (43, "coffee_pot")] {
                 g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
                     {"id": id, "class_name": class, "category": "Props", "properties": [], "states": []}));
@@ -1092,7 +1087,7 @@ mod tests {
         // "coffee" alone: the coffee pot and the coffee table, the names beginning with it.
         assert_eq!(named_in(&w, "make coffee"), [33, 43]);
         // A word for a kind: its members (plate, knife, mug), not the names it begins.
-        let w = demo_edited(|g| {
+        let w = World::demo_edited(|g| {
             g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
                 {"id": 44, "class_name": "dish_soap", "category": "Props", "properties": [], "states": []}));
         });
@@ -1116,7 +1111,7 @@ mod tests {
         // "Room" alone names no room.
         assert!(names("tidy up my room").is_empty());
         // VirtualHome's names for the kitchen and the living room, and for a book.
-        let w = demo_edited(|g| {
+        let w = World::demo_edited(|g| {
             for node in g["nodes"].as_array_mut().unwrap() {
                 let renamed = match node["class_name"].as_str() {
                     Some("kitchen") => "dining_room",
@@ -1421,7 +1416,7 @@ mod tests {
         let w = World::demo();
         assert!(candidates(&w, &[27], &[], None, &[], None).0.iter().any(|(l, _)| l == "door is CLOSED"));
         // Without its room it cannot be reached: CLOSED is not offered, OPEN (it holds) is.
-        let w = demo_edited(|g| g["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE")));
+        let w = World::demo_edited(|g| g["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE")));
         let lines: Vec<String> = candidates(&w, &[27], &[], None, &[], None).0.into_iter().map(|(l, _)| l).collect();
         assert!(!lines.contains(&"door is CLOSED".to_string()) && lines.contains(&"door is OPEN".to_string()), "{lines:?}");
     }
