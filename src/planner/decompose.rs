@@ -134,7 +134,6 @@ impl Run<'_> {
                 .lines
                 .iter()
                 .filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l) && !self.waits_for_its_hand(l, &st.tried))
-                .filter(|l| !self.goals.waits_for_the_right_hand(l, &st.tried))
                 .filter(|l| !(self.cfg.skip_held_lines && holds(l)))
                 .cloned()
                 .collect()

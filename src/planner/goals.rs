@@ -50,9 +50,6 @@ pub struct Goals {
     /// The robot, for inferred lines (its placements are not an object's: it is inside a room
     /// and on the sofa at once).
     robot: Option<u32>,
-    /// For inferred lines (same order as `lines`), the same fact of the other objects a plural
-    /// name gives ("the lights": each light ON), met one after another ([`Goals::advance`]).
-    more: Vec<Vec<Fact>>,
 }
 
 impl Goals {
@@ -68,7 +65,6 @@ impl Goals {
             wording: Wording::default(),
             said: Vec::new(),
             robot: None,
-            more: Vec::new(),
         }
     }
 
@@ -83,31 +79,27 @@ impl Goals {
     pub fn inferred(w: &World, candidates: Vec<(String, Meaning)>, said: Vec<Vec<String>>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings): (Vec<String>, Vec<Meaning>) = candidates.into_iter().unzip();
         let robot = Some(w.character());
-        // A line about one of the objects of a plural name asks the same of the others.
-        let others = |x: u32| -> Vec<u32> { wording.plural.iter().find(|ids| ids.contains(&x)).map(|ids| ids.iter().copied().filter(|&y| y != x).collect()).unwrap_or_default() };
-        let more = meanings
-            .iter()
-            .map(|m| match *m {
-                Meaning::Fact(Fact::State { id, state }) => others(id).into_iter().map(|y| Fact::State { id: y, state }).collect(),
-                Meaning::Fact(Fact::Edge { from, relation, to }) if Some(from) != robot => {
-                    others(from).into_iter().map(|y| Fact::Edge { from: y, relation, to }).collect()
-                }
-                _ => Vec::new(),
-            })
-            .collect();
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot, more }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
     }
 
-    /// Where the fact an inferred `line` now asks for holds in `w` and another of its plural
-    /// name's does not, the line asks for that one from now on (kept too, if the line was
-    /// taken); whether it does.
+    /// Where the fact an inferred `line` now asks for holds in `w` and the same fact of another
+    /// object of its plural name ("the lights": each light ON) does not, the line asks for that
+    /// one from now on (kept too, if the line was taken); whether it does.
     pub fn advance(&mut self, line: &str, w: &World) -> bool {
         let Some(i) = self.lines.iter().position(|l| l == line).filter(|_| self.inferred) else { return false };
         let Meaning::Fact(now) = &self.meanings[i] else { return false };
         if !w.holds(now) {
             return false;
         }
-        let Some(next) = self.more.get(i).and_then(|m| m.iter().find(|f| !w.holds(f))).cloned() else { return false };
+        // (the robot's own facts are no object's: "the lights" never names it)
+        let of = |y: u32| match *now {
+            Fact::State { state, .. } => Some(Fact::State { id: y, state }),
+            Fact::Edge { from, relation, to } if Some(from) != self.robot => Some(Fact::Edge { from: y, relation, to }),
+            _ => None,
+        };
+        let (Fact::State { id: x, .. } | Fact::Edge { from: x, .. } | Fact::Holds { from: x, .. }) = *now;
+        let Some(group) = self.wording.plural.iter().find(|ids| ids.contains(&x)) else { return false };
+        let Some(next) = group.iter().filter(|&&y| y != x).filter_map(|&y| of(y)).find(|f| !w.holds(f)) else { return false };
         if self.kept.contains(now) {
             self.kept.push(next.clone());
         }
@@ -284,14 +276,7 @@ pub fn candidates(
     let in_focus: BTreeSet<u32> = focus.iter().copied().collect();
     let about_named = |ids: &[u32]| named.is_empty() || ids.iter().all(|id| *id == robot || named.contains(id));
     let mut out: Vec<(String, Meaning)> = Vec::new();
-    let holds = |m: &Meaning| matches!(m, Meaning::Fact(f) if w.holds(f));
-    // Objects of one class make one line ("light is ON" of four lights); it is about one where it
-    // does not hold yet, if any (the light that is off), or it would be no change to bring about.
-    let mut push = |line: String, m: Meaning| match out.iter_mut().find(|(l, _)| *l == line) {
-        None => out.push((line, m)),
-        Some((_, old)) if holds(old) && !holds(&m) => *old = m,
-        Some(_) => {}
-    };
+    let mut push = |line: String, m: Meaning| add_line(w, &mut out, line, m);
     for &room in named.iter().filter(|&&id| w.node(id).is_some_and(|n| n.is_room())) {
         let f = Fact::Edge { from: robot, relation: Relation::Inside, to: room };
         push(w.describe(&f), Meaning::Fact(f));
@@ -405,14 +390,22 @@ pub fn candidates(
         let f = Fact::Edge { from: robot, relation: Relation::Close, to: id };
         let line = w.describe(&f);
         made_by.push((line.clone(), v));
-        match out.iter_mut().find(|(l, _)| *l == line) {
-            None => out.push((line, Meaning::Fact(f))),
-            Some((_, old)) if holds(old) && !w.holds(&f) => *old = Meaning::Fact(f),
-            Some(_) => {}
-        }
+        add_line(w, &mut out, line, Meaning::Fact(f));
     }
     let said = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
     (out, said)
+}
+
+/// Adds a candidate line, where `out` has none of its text: objects of one class make one line
+/// ("light is ON" of four lights), about one where it does not hold yet, if any (the light that is
+/// off), or it would be no change to bring about.
+fn add_line(w: &World, out: &mut Vec<(String, Meaning)>, line: String, m: Meaning) {
+    let holds = |m: &Meaning| matches!(m, Meaning::Fact(f) if w.holds(f));
+    match out.iter_mut().find(|(l, _)| *l == line) {
+        None => out.push((line, m)),
+        Some((_, old)) if holds(old) && !holds(&m) => *old = m,
+        Some(_) => {}
+    }
 }
 
 /// What an instruction says plainly of the objects it names, read from its words: the parent
@@ -787,6 +780,17 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["sleep", "on"], &[Verb::Lie]),
     (&["sleep", "in"], &[Verb::Lie]),
     (&["press"], &[Verb::Push]),
+    // Irregular past forms of the verbs above, or of the embodiment's own ("sat down in the sofa"
+    // says SIT as "sit down" does).
+    (&["sat"], &[Verb::Sit]),
+    (&["took"], &[Verb::Grab]),
+    (&["held"], &[Verb::Grab]),
+    (&["ate"], &[Verb::Eat]),
+    (&["drank"], &[Verb::Drink]),
+    (&["found"], &[Verb::Find]),
+    (&["ran"], &[Verb::Run]),
+    (&["slept", "on"], &[Verb::Lie]),
+    (&["slept", "in"], &[Verb::Lie]),
 ];
 
 /// Words that may come between a verb and its object ("sit *down on* the chair").
@@ -1230,6 +1234,9 @@ mod tests {
         assert_eq!(of("put the apple in the fridge, then close it").said, [(10, Verb::Close)]);
         assert_eq!(of("take the apple and put it in the fridge").relations, [(12, Relation::Inside, 10)]);
         assert_eq!(of("Sit down on the chair").said, [(19, Verb::Sit)]);
+        // A verb's irregular past says it too.
+        assert_eq!(of("I sat down on the chair").said, [(19, Verb::Sit)]);
+        assert_eq!(of("he took the apple").said, [(12, Verb::Grab)]);
         // The verb's object is the next one named, with only articles and particles between.
         assert_eq!(of("wipe the kitchen table with the rag").said, [(18, Verb::Wipe)]);
         assert_eq!(of("open it, then take the apple").said, [(12, Verb::Grab)], "\"it\" is not an object it names");

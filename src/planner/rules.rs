@@ -77,8 +77,13 @@ impl Run<'_> {
     /// Whether the root's goal line `line` waits for its hand: it asks for something in the left
     /// hand while the right hand is free and another line, not yet taken, asks for something else
     /// there. GRAB fills the right hand first, so the left hand's line is met only after the right
-    /// one (see `takes_a_reserved_hand`, which keeps a step from spoiling either).
+    /// one (see `takes_a_reserved_hand`, which keeps a step from spoiling either). An inferred
+    /// left-hand line waits for its own right-hand twin the same way
+    /// ([`Goals::waits_for_the_right_hand`](super::goals::Goals::waits_for_the_right_hand)).
     pub(super) fn waits_for_its_hand(&self, line: &str, tried: &[String]) -> bool {
+        if self.goals.waits_for_the_right_hand(line, tried) {
+            return true;
+        }
         let (Some(x), Some(w)) = (self.left_hold_before_right(line), self.env.world()) else { return false };
         self.goals.kept.iter().any(|g| {
             if !matches!(*g, Fact::Edge { relation: Relation::HoldsRh, to: y, .. } if y != x) || w.holds(g) {
