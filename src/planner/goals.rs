@@ -318,6 +318,12 @@ pub fn candidates(
         }
         let args: Vec<u32> = a.args.iter().map(|o| o.id).collect();
         for f in gained(&before, &after, &a) {
+            // A hand holds what can be grabbed: the executor lets GRAB take water, which
+            // VirtualHome does not list as GRABBABLE, but water is drunk from the glass held
+            // (SmolLM2 held the water it was to drink and left the glass in the cupboard).
+            if matches!(f, Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. } if !w.node(to).is_some_and(|n| n.properties.contains(Property::Grabbable))) {
+                continue;
+            }
             let (stated, ids) = match f {
                 Fact::Edge { from, relation, to } => (relation != Relation::Close, vec![from, to]),
                 Fact::State { id, .. } => (true, vec![id]),
@@ -819,6 +825,13 @@ const ALIASES: &[(&str, &str)] = &[
     ("book", "textbook"),
     ("radio", "stereo"),
     ("pc", "computer"),
+    // What one drinks from, called a glass or a cup whatever the scene's class.
+    ("glass", "cup"),
+    ("glass", "mug"),
+    ("cup", "waterglass"),
+    ("cup", "drinkingglass"),
+    ("cup", "mug"),
+    ("mug", "cup"),
 ];
 
 /// Everyday names of rooms (one word, as [`mentions`] joins them: "living room" is `livingroom`)
@@ -1073,6 +1086,8 @@ mod tests {
         // Everyday words for a class of another name.
         assert_eq!(names("sit on the couch and turn on the TV"), [30, 31]);
         assert_eq!(names("turn on the lamp"), [23, 35]);
+        // What one drinks from: the mug, where no glass is in the scene.
+        assert_eq!(names("pour the milk into a glass"), [13, 25]);
         // The robot is never named.
         assert!(names("the character (3) rests").is_empty());
     }
@@ -1391,6 +1406,19 @@ mod tests {
         for l in ["apple is INSIDE to kitchentable", "apple is ON to bread", "apple is INSIDE to bread"] {
             assert!(!lines.contains(&l.to_string()), "{l} in {lines:?}");
         }
+    }
+
+    #[test]
+    fn a_hand_holds_only_what_can_be_grabbed() {
+        // Water (40, not GRABBABLE, though the executor lets GRAB take it) beside the mug (25).
+        let w = World::demo_edited(|g| {
+            let water = serde_json::json!({"id": 40, "class_name": "water", "category": "Food", "properties": ["POURABLE", "DRINKABLE"], "states": []});
+            g["nodes"].as_array_mut().unwrap().push(water);
+            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 40, "relation_type": "INSIDE", "to_id": 1}));
+        });
+        let lines: Vec<String> = candidates(&w, &[40, 25], &[], None, &[], None).0.into_iter().map(|(l, _)| l).collect();
+        assert!(lines.contains(&"character is HOLDS_RH to mug".to_string()), "{lines:?}");
+        assert!(!lines.iter().any(|l| l.contains("HOLDS_RH to water") || l.contains("HOLDS_LH to water")), "{lines:?}");
     }
 
     #[test]
