@@ -91,15 +91,15 @@ impl Goals {
         if !w.holds(now) {
             return false;
         }
-        // (the robot's own facts are no object's: "the lights" never names it)
-        let of = |y: u32| match *now {
-            Fact::State { state, .. } => Some(Fact::State { id: y, state }),
-            Fact::Edge { from, relation, to } if Some(from) != self.robot => Some(Fact::Edge { from: y, relation, to }),
-            _ => None,
+        // The object the fact is about, and the same fact of another (the robot's own facts are
+        // no object's: "the lights" never names it).
+        let (x, of): (u32, &dyn Fn(u32) -> Fact) = match *now {
+            Fact::State { id, state } => (id, &move |y| Fact::State { id: y, state }),
+            Fact::Edge { from, relation, to } if Some(from) != self.robot => (from, &move |y| Fact::Edge { from: y, relation, to }),
+            _ => return false,
         };
-        let (Fact::State { id: x, .. } | Fact::Edge { from: x, .. } | Fact::Holds { from: x, .. }) = *now;
         let Some(group) = self.wording.plural.iter().find(|ids| ids.contains(&x)) else { return false };
-        let Some(next) = group.iter().filter(|&&y| y != x).filter_map(|&y| of(y)).find(|f| !w.holds(f)) else { return false };
+        let Some(next) = group.iter().filter(|&&y| y != x).map(|&y| of(y)).find(|f| !w.holds(f)) else { return false };
         if self.kept.contains(now) {
             self.kept.push(next.clone());
         }
@@ -318,10 +318,9 @@ pub fn candidates(
         }
         let args: Vec<u32> = a.args.iter().map(|o| o.id).collect();
         for f in gained(&before, &after, &a) {
-            // A hand holds what can be grabbed: the executor lets GRAB take water, which
-            // VirtualHome does not list as GRABBABLE, but water is drunk from the glass held
-            // (SmolLM2 held the water it was to drink and left the glass in the cupboard).
-            if matches!(f, Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. } if !w.node(to).is_some_and(|n| n.properties.contains(Property::Grabbable))) {
+            // A hand holds what can be held (SmolLM2 held the water it was to drink and left the
+            // glass in the cupboard).
+            if matches!(f, Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. } if !can_be_held(w, to)) {
                 continue;
             }
             let (stated, ids) = match f {
@@ -400,6 +399,12 @@ pub fn candidates(
     }
     let said = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
     (out, said)
+}
+
+/// Whether `id` is a thing a hand holds and carries: GRABBABLE (the executor's GRAB also takes
+/// water, which VirtualHome does not list so: water is drunk from the glass that is held).
+fn can_be_held(w: &World, id: u32) -> bool {
+    w.node(id).is_some_and(|n| n.properties.contains(Property::Grabbable))
 }
 
 /// Adds a candidate line, where `out` has none of its text: objects of one class make one line
@@ -613,8 +618,7 @@ impl Wording {
         // phone on the desk": SmolLM2 read "phone is ON" for it and switched the phone on). Only
         // a thing that can be carried is put anywhere: "a computer in the home office" says where
         // the computer is.
-        let carried = |x: u32| w.node(x).is_some_and(|n| n.properties.contains(Property::Grabbable));
-        for &(x, _, _) in self.relations.iter().filter(|(x, _, to)| carried(*x) && !w.node(*to).is_some_and(|n| n.is_room())) {
+        for &(x, _, _) in self.relations.iter().filter(|(x, _, to)| can_be_held(w, *x) && !w.node(*to).is_some_and(|n| n.is_room())) {
             let verbs = self.verbs_of(x);
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
         }
