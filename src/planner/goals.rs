@@ -401,8 +401,9 @@ pub fn candidates(
     // A relation that holds at the start (a thing's place, what a hand holds, where the robot
     // is) is no goal: its line would be offered once a step had undone it, to put back what was
     // taken for the task (SmolLM2 put the glass it was to drink from back in the cabinet it took
-    // it from). What the words say never holds at the start (`keep_said` takes the other place).
-    // A state is a goal: a fridge opened on the way is closed again.
+    // it from). Said by the words, it asks nothing either (`keep_said` reads "put the plate in
+    // the cabinet" of a plate in it as the other placement). A state is a goal: a fridge opened
+    // on the way is closed again.
     out.retain(|(_, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)));
     (out, said)
 }
