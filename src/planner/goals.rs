@@ -255,7 +255,8 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 /// further ([`Wording`]). A state that neither holds nor comes of any action is never
 /// offered, nor, where the `instruction` does not name the verb that sets it, an appliance OFF
 /// or PLUGGED_OUT or an object CLEAN (any washing verb), nor an object INSIDE something that is
-/// not a container, or ON something that is neither a surface nor a container.
+/// not a container, or ON something that is neither a surface nor a container, nor a relation
+/// that holds in `w` (the world at the start: where a thing was taken from is no goal).
 ///
 /// Returns the lines with what each asks for, and what the words say among them as groups of
 /// lines ([`Wording::keep_said`]; none without `wording`).
@@ -1419,7 +1420,7 @@ mod tests {
     }
 
     #[test]
-    fn a_relation_that_holds_at_the_start_is_a_line_only_where_the_words_say_it() {
+    fn a_relation_that_holds_at_the_start_is_no_line() {
         let w = World::demo();
         let lines = |focus: &[u32], t: &str| -> (Vec<String>, Vec<Vec<String>>) {
             let words = Wording::of(&w, focus, t);
@@ -1538,7 +1539,7 @@ mod tests {
         // The fridge's other state now contradicts a taken line; its other facts do not.
         assert!(g.contradicts_taken("fridge is OPEN") && !g.contradicts_taken("fridge is ON"));
         assert!(!g.contradicts_taken("fridge is CLOSED") && !g.contradicts_taken("TOUCH"));
-        // An object is in one place: once it is to be in the fridge, not on the counter.
+        // An object is in one place: once it is to be in the fridge, not on the table.
         assert!(!g.contradicts_taken("apple is ON to kitchentable"));
         // Held first, then put in the fridge: no longer kept in hand, nor to be held again.
         assert!(!g.contradicts_taken("character is HOLDS_RH to apple"));
