@@ -419,7 +419,36 @@ impl Run<'_> {
                 list.iter().filter(|a| verbs.contains(&a.verb)).cloned().collect()
             }
         };
-        Ok(ActionSet::Exact(if achieving.is_empty() { list } else { achieving }))
+        Ok(ActionSet::Exact(if achieving.is_empty() { list } else { self.held_to_wash(w, &list, achieving) }))
+    }
+
+    /// A thing washed by hand is held first: where a hand can take it now, the step toward
+    /// washing it (WASH, RINSE, SCRUB, WIPE) is to take it, and while one is held it is washed
+    /// before another is taken. SmolLM2 washed the plate where it lay; VirtualHome's programs of
+    /// washing dishes by hand grab each dish before they wash it.
+    fn held_to_wash(&self, w: &World, list: &[Action], achieving: Vec<Action>) -> Vec<Action> {
+        if self.cfg.excluded_verbs.contains(&Verb::Grab) {
+            return achieving;
+        }
+        let robot = w.character();
+        let held = |id: u32| [Relation::HoldsRh, Relation::HoldsLh].iter().any(|&r| w.has_edge(robot, r, id));
+        let by_hand = |a: &Action| goals::WASHING.contains(&a.verb) && a.args.first().is_some_and(|x| goals::can_be_held(w, x.id));
+        let washes_held = achieving.iter().any(|a| by_hand(a) && held(a.args[0].id));
+        let mut steps: Vec<Action> = Vec::new();
+        for a in achieving {
+            let step = if !by_hand(&a) || held(a.args[0].id) {
+                a
+            } else if washes_held {
+                continue;
+            } else {
+                let grab = Action { verb: Verb::Grab, args: vec![a.args[0].clone()] };
+                if list.contains(&grab) { grab } else { a }
+            };
+            if !steps.contains(&step) {
+                steps.push(step);
+            }
+        }
+        steps
     }
 
     /// The first step of the world's way to each of `aims` that `ok` takes (given the world the

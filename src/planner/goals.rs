@@ -411,7 +411,7 @@ pub fn candidates(
 
 /// Whether `id` is a thing a hand holds and carries: GRABBABLE (the executor's GRAB also takes
 /// water, which VirtualHome does not list so: water is drunk from the glass that is held).
-fn can_be_held(w: &World, id: u32) -> bool {
+pub(super) fn can_be_held(w: &World, id: u32) -> bool {
     w.node(id).is_some_and(|n| n.properties.contains(Property::Grabbable))
 }
 
@@ -766,7 +766,7 @@ const PHRASE_ENDS: &[&str] = &[
 ];
 
 /// The verbs that wash something: what "clean" says, and what a CLEAN line needs the words to name.
-const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse];
+pub(super) const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse];
 
 /// Everyday phrases for the embodiment's verbs that do not begin with the verb's name ("pick up
 /// the phone": GRAB; "turn on the lamp": SWITCHON). A word of four letters or more also matches

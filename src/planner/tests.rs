@@ -1348,6 +1348,54 @@ fn an_action_line_is_done_on_the_object_the_words_say_it_of() {
 }
 
 #[test]
+fn a_thing_washed_by_hand_is_taken_first() {
+    let go = |instruction: &str, line: &str, script: &[&str]| {
+        let mut m = Scripted::new(script);
+        m.preferences = [format!("subgoal: {line}"), "done".to_string()].into();
+        let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+        let req = PlanRequest::new(instruction, vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+        assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+        (plan_lines(&out), m.grammars)
+    };
+    // The dirty mug's line is its state: the walk and the grab are its only steps.
+    let (mug, _) = go("wash the mug", "mug is CLEAN", &["action: [WASH] <mug> (25)"]);
+    assert_eq!(mug, ["[WALK] <mug> (25)", "[GRAB] <mug> (25)", "[WASH] <mug> (25)"]);
+    // The clean apple's is RINSE's own: after the walk, the grab is offered, not the rinse.
+    let (apple, grammars) = go("rinse the apple", "RINSE", &["action: [GRAB] <apple> (12)", "action: [RINSE] <apple> (12)"]);
+    assert_eq!(apple, ["[WALK] <apple> (12)", "[GRAB] <apple> (12)", "[RINSE] <apple> (12)"]);
+    assert!(!grammars[0].contains("RINSE"), "{grammars:?}");
+    // What no hand takes is washed where it is.
+    let (table, _) = go("wash the kitchentable", "kitchentable is CLEAN", &["action: [WASH] <kitchentable> (18)"]);
+    assert_eq!(table, ["[WALK] <kitchentable> (18)", "[WASH] <kitchentable> (18)"]);
+}
+
+#[test]
+fn a_thing_held_is_washed_before_another_is_taken() {
+    // A cup and a plate within reach, clean: "rinse" is RINSE's line, over both.
+    let scene = r#"{"nodes": [
+        {"id": 1, "class_name": "kitchen", "category": "Rooms", "properties": [], "states": []},
+        {"id": 2, "class_name": "character", "category": "Characters", "properties": [], "states": []},
+        {"id": 3, "class_name": "cup", "category": "Kitchen", "properties": ["GRABBABLE", "RECIPIENT", "MOVABLE"], "states": ["CLEAN"]},
+        {"id": 4, "class_name": "plate", "category": "Kitchen", "properties": ["GRABBABLE", "RECIPIENT", "SURFACES", "MOVABLE"], "states": ["CLEAN"]}],
+      "edges": [{"from_id": 2, "relation_type": "INSIDE", "to_id": 1}, {"from_id": 3, "relation_type": "INSIDE", "to_id": 1},
+        {"from_id": 4, "relation_type": "INSIDE", "to_id": 1}, {"from_id": 2, "relation_type": "CLOSE", "to_id": 3},
+        {"from_id": 3, "relation_type": "CLOSE", "to_id": 2}, {"from_id": 2, "relation_type": "CLOSE", "to_id": 4},
+        {"from_id": 4, "relation_type": "CLOSE", "to_id": 2}]}"#;
+    let mut m = Scripted::new(&["action: [GRAB] <cup> (3)", "action: [RINSE] <cup> (3)"]);
+    m.preferences = ["subgoal: RINSE", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let req = PlanRequest::new("rinse the cup and the plate", vec![]);
+    let w = World::from_json(scene, "test").unwrap();
+    let out = plan(&mut m, &mut SimEnv::new(w, vec![]), &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
+    assert_eq!(plan_lines(&out), ["[GRAB] <cup> (3)", "[RINSE] <cup> (3)"]);
+    // Each is taken before it is rinsed; once the cup is held, the plate is not taken.
+    assert!(m.grammars[0].contains("[GRAB]") && !m.grammars[0].contains("[RINSE]"), "{:?}", m.grammars);
+    assert!(m.grammars[1].contains("[RINSE]") && !m.grammars[1].contains("[GRAB]"), "{:?}", m.grammars);
+}
+
+#[test]
 fn an_action_line_with_no_way_left_to_it_ends_without_a_step() {
     // Water poured away is out of hand and cannot be drunk: below DRINK no step is offered, only
     // `done` (any step of the house was offered before: SmolLM2 sat on six seats in turn).
