@@ -360,7 +360,7 @@ impl Run<'_> {
     /// from the line's words: a step of another verb is not congruent with it (SmolLM2 wrote
     /// PUTBACK under "POUR" in every "Make coffee"). A shown line's fact is never worked out in
     /// the world: which steps make the task's own goals true would be the oracle the method
-    /// rules out.
+    /// rules out. Either way, a thing to be washed by hand is taken first (`held_to_wash`).
     fn toward_own_line(&self, node: NodeId, actions: ActionSet, targets: &[Action]) -> Result<ActionSet, StopCause> {
         let ActionSet::Exact(list) = actions else { return Ok(actions) };
         if !self.cfg.toward_lines || !self.under_offered(node) {
