@@ -430,8 +430,7 @@ impl Run<'_> {
         if self.cfg.excluded_verbs.contains(&Verb::Grab) {
             return achieving;
         }
-        let robot = w.character();
-        let held = |id: u32| [Relation::HoldsRh, Relation::HoldsLh].iter().any(|&r| w.has_edge(robot, r, id));
+        let held = |id: u32| w.holds(&Fact::Holds { from: w.character(), to: Some(id) });
         let by_hand = |a: &Action| goals::WASHING.contains(&a.verb) && a.args.first().is_some_and(|x| goals::can_be_held(w, x.id));
         let washes_held = achieving.iter().any(|a| by_hand(a) && held(a.args[0].id));
         let mut steps: Vec<Action> = Vec::new();
