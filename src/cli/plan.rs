@@ -203,6 +203,10 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
             "verdict" => {
                 eprintln!("{}    -> {}", indent(node, &depth_of), v["verdict"].as_str().unwrap_or(""));
             }
+            // A line of a plural name met for one of its objects, going on to the next.
+            "line_next" => {
+                eprintln!("{}    [met; next: {}]", indent(node, &depth_of), v["now"].as_str().unwrap_or(""));
+            }
             "instruction_objects" => {
                 let list = |key: &str| {
                     let all: Vec<&str> = v[key].as_array().into_iter().flatten().filter_map(Value::as_str).collect();

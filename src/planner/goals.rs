@@ -50,6 +50,9 @@ pub struct Goals {
     /// The robot, for inferred lines (its placements are not an object's: it is inside a room
     /// and on the sofa at once).
     robot: Option<u32>,
+    /// Lines that have gone on to another object of their plural name ([`Goals::advance`]), each
+    /// with the words of what it asks for now.
+    now: Vec<(String, String)>,
 }
 
 impl Goals {
@@ -65,6 +68,7 @@ impl Goals {
             wording: Wording::default(),
             said: Vec::new(),
             robot: None,
+            now: Vec::new(),
         }
     }
 
@@ -79,7 +83,7 @@ impl Goals {
     pub fn inferred(w: &World, candidates: Vec<(String, Meaning)>, said: Vec<Vec<String>>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings): (Vec<String>, Vec<Meaning>) = candidates.into_iter().unzip();
         let robot = Some(w.character());
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot, now: Vec::new() }
     }
 
     /// Where the fact an inferred `line` now asks for holds in `w` and the same fact of another
@@ -103,8 +107,17 @@ impl Goals {
         if self.kept.contains(now) {
             self.kept.push(next.clone());
         }
+        self.now.retain(|(l, _)| l != line);
+        self.now.push((line.to_string(), w.describe(&next)));
         self.meanings[i] = Meaning::Fact(next);
         true
+    }
+
+    /// The words of what `line` asks for now: its own, or, once it has gone on to another object
+    /// of its plural name, that object's ("the groceries": "milk is INSIDE to fridge" after the
+    /// apple's line was met). The model is shown these, and the node's objects are read from them.
+    pub fn asks_now<'a>(&'a self, line: &'a str) -> &'a str {
+        self.now.iter().find(|(l, _)| l == line).map_or(line, |(_, now)| now.as_str())
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -478,13 +491,17 @@ impl Wording {
             }
         }
         found.sort_by_key(|(k, _, _)| *k);
-        // A name whose last word is in the plural, of two or more objects of one class.
+        // A name whose last word is in the plural, of two or more objects of one class; or a
+        // word for a kind of thing in the plural ("the groceries", "the dishes": each of them,
+        // whatever their classes; "put the groceries in the fridge" put the apple alone there).
+        let kind_in_plural = |word: &str| word.ends_with('s') && KINDS.iter().any(|(kind, _)| word_forms(word).iter().any(|f| f == kind));
         let plural: Vec<Vec<u32>> = found
             .iter()
-            .filter(|(_, end, ids)| {
+            .filter(|(k, end, ids)| {
                 let last = &words[end - 1];
                 let classes: BTreeSet<&str> = ids.iter().filter_map(|&id| w.node(id).map(|n| n.class_name)).collect();
-                ids.len() > 1 && classes.len() == 1 && last.ends_with('s') && !classes.iter().any(|c| c.to_lowercase().ends_with(last.as_str()))
+                let one_class = classes.len() == 1 && !classes.iter().any(|c| c.to_lowercase().ends_with(last.as_str()));
+                ids.len() > 1 && last.ends_with('s') && (one_class || (*end == k + 1 && kind_in_plural(last)))
             })
             .map(|(_, _, ids)| ids.clone())
             .collect();
@@ -607,11 +624,17 @@ impl Wording {
             _ => false,
         };
         let objects: BTreeSet<u32> = self.said.iter().map(|(id, _)| *id).collect();
-        for x in objects {
+        let class = |id: u32| w.node(id).map(|n| n.class_name);
+        for &x in &objects {
             let verbs = self.verbs_of(x);
             let of_said = |(l, m): &(String, Meaning)| verbs_of_line(l, m).iter().any(|v| verbs.contains(v));
-            if out.iter().any(|c| alone_on(&c.1, x) && of_said(c)) {
-                out.retain(|c| !alone_on(&c.1, x) || of_said(c));
+            // With the objects of its class the same verbs are said of: one line stands for a
+            // class ("light is ON" is about the light that is off), so "turn off the lights"
+            // offered "light is ON" of the other light, and SmolLM2 took it.
+            let peers: Vec<u32> = objects.iter().copied().filter(|&y| class(y) == class(x) && self.verbs_of(y) == verbs).collect();
+            let alone_on_peers = |m: &Meaning| peers.iter().any(|&y| alone_on(m, y));
+            if out.iter().any(|c| alone_on_peers(&c.1) && of_said(c)) {
+                out.retain(|c| !alone_on_peers(&c.1) || of_said(c));
             }
         }
         // What the words say to take ("take a book from the shelf and read it") stays in hand
@@ -1248,6 +1271,10 @@ mod tests {
         // A name in the plural means each of its objects.
         assert_eq!(of("turn on the lights").plural, [vec![23, 35]]);
         assert!(of("turn on the light").plural.is_empty() && of("put the apples in the fridge").plural.is_empty());
+        // So does a word for a kind of thing in the plural, whatever the classes of its things.
+        assert_eq!(of("put the groceries in the fridge").plural, [vec![12, 13, 14]]);
+        assert_eq!(of("put the dishes in the sink").plural, [vec![17, 24, 25]]);
+        assert!(of("put the dish in the sink").plural.is_empty());
         let list = of("pick up the milk and the apple");
         assert_eq!(list.said, [(13, Verb::Grab), (12, Verb::Grab)]);
         assert_eq!(list.said_once.len(), 2);
@@ -1443,6 +1470,23 @@ mod tests {
         let (c, said) = candidates(&w, &[12, 11], &[], Some(t), &[12, 11], Some(&Wording::of(&w, &[12, 11], t)));
         assert_eq!(said, [["character is HOLDS_LH to apple"]]);
         assert!(!c.iter().any(|(l, _)| l == "character is HOLDS_RH to apple"), "{c:?}");
+    }
+
+    #[test]
+    fn a_verb_said_of_the_objects_of_one_class_leaves_out_the_opposite_line_of_any_of_them() {
+        // The demo's kitchen light (23) is on, the living room's (35) off: "light is ON" stands
+        // for the one that is off, and is not a line of "turn off the light(s)".
+        let w = World::demo();
+        let lines = |t: &str| -> Vec<String> {
+            let named = instruction_objects(&w, &[23, 35], t);
+            candidates(&w, &[23, 35], &[], Some(t), &named, Some(&Wording::of(&w, &[23, 35], t))).0.into_iter().map(|(l, _)| l).collect()
+        };
+        for t in ["turn off the light", "turn off the lights"] {
+            let off = lines(t);
+            assert!(off.contains(&"light is OFF".to_string()) && !off.contains(&"light is ON".to_string()), "{t}: {off:?}");
+        }
+        let on = lines("turn on the lights");
+        assert!(on.contains(&"light is ON".to_string()) && !on.contains(&"light is OFF".to_string()), "{on:?}");
     }
 
     #[test]

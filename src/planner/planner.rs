@@ -367,7 +367,7 @@ impl Run<'_> {
         match self.mode {
             ContextMode::Step => NodeView {
                 observation,
-                goal: self.tree.node(node).text.clone(),
+                goal: self.goals.asks_now(&self.tree.node(node).text).to_string(),
                 previous: previous.map(str::to_string),
                 history: None,
                 rejected: rejected.map(str::to_string),
@@ -376,7 +376,7 @@ impl Run<'_> {
             },
             ContextMode::NoTree => NodeView {
                 observation,
-                goal: self.tree.node(node).text.clone(),
+                goal: self.goals.asks_now(&self.tree.node(node).text).to_string(),
                 previous: None,
                 history: history(),
                 rejected: rejected.map(str::to_string),
@@ -501,7 +501,8 @@ impl Run<'_> {
                             Some(goals::Meaning::Fact(Fact::State { id, .. } | Fact::Edge { from: id, .. })) => Some(*id),
                             _ => None,
                         };
-                        self.trace.event("line_next", json!({"node": node, "line": text, "object": of}));
+                        let now = self.goals.asks_now(&text);
+                        self.trace.event("line_next", json!({"node": node, "line": text, "object": of, "now": now}));
                         continue;
                     }
                     self.trace.event("line_holds", json!({"node": node, "line": text}));

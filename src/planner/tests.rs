@@ -1503,6 +1503,35 @@ fn a_line_of_a_plural_name_is_met_for_each_of_its_objects() {
 }
 
 #[test]
+fn a_word_for_a_kind_in_the_plural_means_each_of_its_things() {
+    // "The groceries" are the demo's apple, milk and bread (VirtualHome's Food): the one line the
+    // root takes, "apple is INSIDE to fridge", goes on to the milk and then the bread once it
+    // holds, and the model is shown the line of the thing being put away.
+    use crate::world::vocab::Relation;
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: apple is INSIDE to fridge", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest::new("put the groceries in the fridge", vec![]);
+    let next = std::rc::Rc::new(std::cell::RefCell::new(Vec::<String>::new()));
+    let mut trace = TraceWriter::sink();
+    let seen = next.clone();
+    trace.set_echo(Box::new(move |kind, v| {
+        if kind == "line_next" {
+            seen.borrow_mut().push(v["now"].as_str().unwrap_or_default().to_string());
+        }
+    }));
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut trace);
+    assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
+    let w = env.world().unwrap();
+    for id in [12, 13, 14] {
+        assert!(w.holds(&Fact::Edge { from: id, relation: Relation::Inside, to: 10 }), "{id}: {:?}", plan_lines(&out));
+    }
+    assert_eq!(*next.borrow(), ["milk is INSIDE to fridge", "bread is INSIDE to fridge"]);
+    assert_eq!(out.tree.nodes().filter(|n| n.text == "apple is INSIDE to fridge").count(), 1);
+}
+
+#[test]
 fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     // READ took the book in the right hand; "character is HOLDS_RH to apple" then has no step
     // that makes it true (a grab fills the left hand), so the steps that put the book down are
