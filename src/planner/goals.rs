@@ -419,7 +419,17 @@ pub fn candidates(
     // the cabinet" of a plate in it as the other placement). A state is a goal: a fridge opened
     // on the way is closed again.
     out.retain(|(_, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)));
-    (out, said)
+    // What the words say keeps the lines left (a group of such a relation alone is none): the
+    // root looks for a group's lines among those it is offered, and a reader of the trace's
+    // groups finds each line among the candidates.
+    let mut kept_said: Vec<Vec<String>> = Vec::new();
+    for group in said {
+        let group: Vec<String> = group.into_iter().filter(|l| out.iter().any(|(o, _)| o == l)).collect();
+        if !group.is_empty() && !kept_said.contains(&group) {
+            kept_said.push(group);
+        }
+    }
+    (out, kept_said)
 }
 
 /// Whether `id` is a thing a hand holds and carries: GRABBABLE (the executor's GRAB also takes
@@ -1487,6 +1497,24 @@ mod tests {
         }
         let on = lines("turn on the lights");
         assert!(on.contains(&"light is ON".to_string()) && !on.contains(&"light is OFF".to_string()), "{on:?}");
+    }
+
+    #[test]
+    fn what_the_words_say_is_grouped_from_the_lines_offered() {
+        // The robot (3) close to the fridge (10) at the start: "walk to the fridge" asks for no
+        // line of being close to it (a relation that holds at the start is none), and no group of
+        // what the words say names that line; "open the fridge" is still said.
+        let w = World::demo_edited(|g| {
+            for (from, to) in [(3, 10), (10, 3)] {
+                g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": from, "relation_type": "CLOSE", "to_id": to}));
+            }
+        });
+        let t = "walk to the fridge and open it";
+        let (c, said) = candidates(&w, &[10], &[], Some(t), &[10], Some(&Wording::of(&w, &[10], t)));
+        let lines: Vec<&String> = c.iter().map(|(l, _)| l).collect();
+        assert!(!lines.contains(&&"character is CLOSE to fridge".to_string()), "{lines:?}");
+        assert!(said.iter().flatten().all(|l| lines.contains(&l)), "{said:?} not all in {lines:?}");
+        assert_eq!(said, [["fridge is OPEN"]]);
     }
 
     #[test]
