@@ -491,10 +491,33 @@ impl Wording {
             let mut before: Vec<&(usize, usize, Vec<u32>)> = found.iter().filter(|(_, end, _)| *end <= k).collect();
             before.sort_by_key(|(_, end, _)| std::cmp::Reverse(*end));
             let after_in = k > 0 && PARTICLES.contains(&words[k - 1].as_str());
-            let meant = match before.as_slice() {
-                [last, earlier, ..] if after_in && last.1 + 1 == k => Some(*earlier),
-                [last, ..] => Some(*last),
-                [] => None,
+            // Said right after a verb ("wash it", "close it"), it is the last thing named that the
+            // verb can be done to; and, but for a verb that works a place (opens, closes or
+            // switches it), a thing acted on before a place it was put in or on: "put the mug in
+            // the sink and wash it" is the mug (SmolLM2 washed the sink), "put the box in the
+            // oven, close it" the oven, "take the book from the shelf and read it" the book.
+            let verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
+            let affords = |ids: &[u32]| {
+                ids.iter().any(|&id| typed_actions(w, &[id]).iter().any(|a| verbs.contains(&a.verb) && a.args.first().is_some_and(|o| o.id == id)))
+            };
+            let works_a_place =
+                verbs.iter().any(|v| matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut));
+            // (after "in" or "on", an article and one more word aside: "on the dinner table")
+            let a_place = |j: usize| {
+                let mut i = j;
+                while i > 0 && DETERMINERS.contains(&words[i - 1].as_str()) {
+                    i -= 1;
+                }
+                let place_word = |x: &String| ["in", "into", "inside", "on", "onto"].contains(&x.as_str());
+                (i > 0 && place_word(&words[i - 1])) || (i > 1 && place_word(&words[i - 2]) && !says_a_verb(&words[i - 1]))
+            };
+            let acted_on = before.iter().find(|(j, _, ids)| !works_a_place && !a_place(*j) && affords(ids));
+            let by_verb = acted_on.or_else(|| before.iter().find(|(_, _, ids)| affords(ids)));
+            let meant = match (by_verb, before.as_slice()) {
+                (Some(m), _) => Some(*m),
+                (None, [last, earlier, ..]) if after_in && last.1 + 1 == k => Some(*earlier),
+                (None, [last, ..]) => Some(*last),
+                (None, []) => None,
             };
             if let Some((_, _, ids)) = meant {
                 found.push((k, k + 1, ids.clone()));
@@ -1296,6 +1319,14 @@ mod tests {
         assert_eq!(of("I walk to the faucet and switch it on").said, [(21, Verb::Walk), (21, Verb::SwitchOn)]);
         assert_eq!(of("put the apple in the fridge, then close it").said, [(10, Verb::Close)]);
         assert_eq!(of("take the apple and put it in the fridge").relations, [(12, Relation::Inside, 10)]);
+        // After a verb, the last thing named that the verb can be done to, one acted on before a
+        // place: the mug (25) put in the sink (20) is what is washed; a book is read, not the
+        // coffee table (33) it is taken from.
+        assert!(of("put the mug in the sink and wash it").said.contains(&(25, Verb::Wash)));
+        assert!(!of("put the mug in the sink and wash it").said.iter().any(|&(id, v)| id == 20 && v == Verb::Wash));
+        assert!(of("take the book from the coffee table and read it").said.contains(&(34, Verb::Read)));
+        // A verb that works a place is said of the place, though the milk (13) closes too.
+        assert_eq!(of("put the milk in the fridge and close it").said, [(10, Verb::Close)]);
         assert_eq!(of("Sit down on the chair").said, [(19, Verb::Sit)]);
         // A verb's irregular past says it too.
         assert_eq!(of("I sat down on the chair").said, [(19, Verb::Sit)]);
