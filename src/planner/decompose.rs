@@ -274,7 +274,7 @@ impl Run<'_> {
             return Ok(if self.root_view.is_empty() { self.focus.clone() } else { self.root_view.clone() });
         }
         let w = self.world()?;
-        let named = named_objects(w, &self.focus, self.goals.asks_now(&self.tree.node(node).text));
+        let named = named_objects(w, &self.focus, &self.goals.asks_now(&self.tree.node(node).text, w));
         if named.is_empty() {
             return Ok(self.focus.clone());
         }

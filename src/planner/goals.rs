@@ -15,6 +15,7 @@ use super::PlanRequest;
 use crate::action::Verb;
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::{Property, Relation, State};
+use crate::world::affordance::slot_admits;
 use crate::world::{Fact, World};
 
 /// What a candidate line asks for.
@@ -50,9 +51,6 @@ pub struct Goals {
     /// The robot, for inferred lines (its placements are not an object's: it is inside a room
     /// and on the sofa at once).
     robot: Option<u32>,
-    /// Lines that have gone on to another object of their plural name ([`Goals::advance`]), each
-    /// with the words of what it asks for now.
-    now: Vec<(String, String)>,
 }
 
 impl Goals {
@@ -68,7 +66,6 @@ impl Goals {
             wording: Wording::default(),
             said: Vec::new(),
             robot: None,
-            now: Vec::new(),
         }
     }
 
@@ -83,7 +80,7 @@ impl Goals {
     pub fn inferred(w: &World, candidates: Vec<(String, Meaning)>, said: Vec<Vec<String>>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings): (Vec<String>, Vec<Meaning>) = candidates.into_iter().unzip();
         let robot = Some(w.character());
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot, now: Vec::new() }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
     }
 
     /// Where the fact an inferred `line` now asks for holds in `w` and the same fact of another
@@ -107,8 +104,6 @@ impl Goals {
         if self.kept.contains(now) {
             self.kept.push(next.clone());
         }
-        self.now.retain(|(l, _)| l != line);
-        self.now.push((line.to_string(), w.describe(&next)));
         self.meanings[i] = Meaning::Fact(next);
         true
     }
@@ -116,8 +111,12 @@ impl Goals {
     /// The words of what `line` asks for now: its own, or, once it has gone on to another object
     /// of its plural name, that object's ("the groceries": "milk is INSIDE to fridge" after the
     /// apple's line was met). The model is shown these, and the node's objects are read from them.
-    pub fn asks_now<'a>(&'a self, line: &'a str) -> &'a str {
-        self.now.iter().find(|(l, _)| l == line).map_or(line, |(_, now)| now.as_str())
+    /// (An inferred fact line is its fact's words, [`World::describe`], until `advance` moves it.)
+    pub fn asks_now(&self, line: &str, w: &World) -> String {
+        match self.meaning(line) {
+            Some(Meaning::Fact(f)) => w.describe(f),
+            _ => line.to_string(),
+        }
     }
 
     /// Whether an inferred `line` contradicts a taken one: the other state of the same pair for
@@ -497,9 +496,7 @@ impl Wording {
             // the sink and wash it" is the mug (SmolLM2 washed the sink), "put the box in the
             // oven, close it" the oven, "take the book from the shelf and read it" the book.
             let verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
-            let affords = |ids: &[u32]| {
-                ids.iter().any(|&id| typed_actions(w, &[id]).iter().any(|a| verbs.contains(&a.verb) && a.args.first().is_some_and(|o| o.id == id)))
-            };
+            let affords = |ids: &[u32]| ids.iter().any(|&id| verbs.iter().any(|&v| v.arity() == 1 && slot_admits(w, v, 0, id)));
             let works_a_place =
                 verbs.iter().any(|v| matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut));
             // (after "in" or "on", an article and one more word aside: "on the dinner table")
@@ -508,7 +505,7 @@ impl Wording {
                 while i > 0 && DETERMINERS.contains(&words[i - 1].as_str()) {
                     i -= 1;
                 }
-                let place_word = |x: &String| ["in", "into", "inside", "on", "onto"].contains(&x.as_str());
+                let place_word = |x: &String| INTO.contains(&x.as_str()) || ONTO.contains(&x.as_str());
                 (i > 0 && place_word(&words[i - 1])) || (i > 1 && place_word(&words[i - 2]) && !says_a_verb(&words[i - 1]))
             };
             let acted_on = before.iter().find(|(j, _, ids)| !works_a_place && !a_place(*j) && affords(ids));
@@ -587,9 +584,9 @@ impl Wording {
                 between.iter().any(|x| preps.contains(&x.as_str()))
                     && only(between, &|x| DETERMINERS.contains(&x) || preps.contains(&x) || x == "top" || x == "of")
             };
-            if says(&["in", "into", "inside"]) {
+            if says(INTO) {
                 Some(Relation::Inside)
-            } else if says(&["on", "onto"]) {
+            } else if says(ONTO) {
                 Some(Relation::On)
             } else {
                 None
@@ -866,6 +863,10 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["slept", "on"], &[Verb::Lie]),
     (&["slept", "in"], &[Verb::Lie]),
 ];
+
+/// The words that put a thing in ("A in B") or on ("A on B") another.
+const INTO: &[&str] = &["in", "into", "inside"];
+const ONTO: &[&str] = &["on", "onto"];
 
 /// Words that may come between a verb and its object ("sit *down on* the chair").
 const PARTICLES: &[&str] = &["on", "onto", "in", "into", "inside", "at", "to", "up", "down", "off", "out", "over"];

@@ -364,10 +364,13 @@ impl Run<'_> {
         let observation =
             self.states.since(&self.env.observe(&self.root_view, self.cfg.observe_budget), self.cfg.observe_budget);
         let history = || Some(self.executed.iter().map(|a| a.to_string()).collect());
+        // (a line of a plural name, in the words of the object it has gone on to)
+        let text = &self.tree.node(node).text;
+        let goal = self.env.world().map_or_else(|| text.clone(), |w| self.goals.asks_now(text, w));
         match self.mode {
             ContextMode::Step => NodeView {
                 observation,
-                goal: self.goals.asks_now(&self.tree.node(node).text).to_string(),
+                goal,
                 previous: previous.map(str::to_string),
                 history: None,
                 rejected: rejected.map(str::to_string),
@@ -376,7 +379,7 @@ impl Run<'_> {
             },
             ContextMode::NoTree => NodeView {
                 observation,
-                goal: self.goals.asks_now(&self.tree.node(node).text).to_string(),
+                goal,
                 previous: None,
                 history: history(),
                 rejected: rejected.map(str::to_string),
@@ -501,7 +504,7 @@ impl Run<'_> {
                             Some(goals::Meaning::Fact(Fact::State { id, .. } | Fact::Edge { from: id, .. })) => Some(*id),
                             _ => None,
                         };
-                        let now = self.goals.asks_now(&text);
+                        let now = self.goals.asks_now(&text, w);
                         self.trace.event("line_next", json!({"node": node, "line": text, "object": of, "now": now}));
                         continue;
                     }
