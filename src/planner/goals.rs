@@ -577,6 +577,43 @@ impl Wording {
                 said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
             }
         }
+        // A word for heating says to switch on the appliance it is done in or on ("heat the milk
+        // in the microwave", "cook some pasta on the stove": SmolLM2 put the milk in and stopped;
+        // no verb of the embodiment is "heat"). The appliance is the first thing named after the
+        // word, before any other verb, that has a switch and holds things; or else the last such
+        // thing named before it, where nothing is named after it ("put the pot on the stove to
+        // cook"; "put the milk in the fridge and heat the bread" asks nothing of the fridge). A word inside a name
+        // ("cooking pot") says nothing.
+        for k in 0..words.len() {
+            let heating = HEATING.iter().any(|h| words[k].starts_with(h));
+            if !heating || found.iter().any(|(j, end, _)| (*j..*end).contains(&k)) {
+                continue;
+            }
+            let appliance = |ids: &Vec<u32>| -> Vec<u32> {
+                let holds_things = |id: u32| {
+                    w.node(id).is_some_and(|n| {
+                        n.properties.contains(Property::HasSwitch)
+                            && (n.properties.contains(Property::Containers) || n.properties.contains(Property::Surfaces))
+                    })
+                };
+                ids.iter().copied().filter(|&id| holds_things(id)).collect()
+            };
+            let next_verb = (k + 1..words.len()).find(|&i| says_a_verb(&words[i])).unwrap_or(words.len());
+            let after: Vec<&Vec<u32>> = found.iter().filter(|(j, _, _)| *j > k && *j < next_verb).map(|(_, _, ids)| ids).collect();
+            let meant = if after.is_empty() {
+                found.iter().rev().filter(|(_, end, _)| *end <= k).map(|(_, _, ids)| appliance(ids)).find(|a| !a.is_empty())
+            } else {
+                after.into_iter().map(appliance).find(|a| !a.is_empty())
+            };
+            if let Some(ids) = meant {
+                for &id in &ids {
+                    if !said.contains(&(id, Verb::SwitchOn)) {
+                        said.push((id, Verb::SwitchOn));
+                    }
+                }
+                said_once.push(ids.iter().map(|&id| (id, Verb::SwitchOn)).collect());
+            }
+        }
         // The relation the words say between each object named and the next ("A in B", "A on B").
         let relation_between = |(_, i, _): &(usize, usize, Vec<u32>), (j, _, _): &(usize, usize, Vec<u32>)| {
             let between = &words[*i..*j];
@@ -863,6 +900,10 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["slept", "on"], &[Verb::Lie]),
     (&["slept", "in"], &[Verb::Lie]),
 ];
+
+/// Words for heating a thing in or on an appliance (their longer forms too: "heating", "cooked"):
+/// what they ask of the appliance is that it be switched on.
+const HEATING: &[&str] = &["heat", "warm", "cook", "boil", "bake", "toast", "fry", "fried", "fries"];
 
 /// The words that put a thing in ("A in B") or on ("A on B") another.
 const INTO: &[&str] = &["in", "into", "inside"];
@@ -1349,6 +1390,13 @@ mod tests {
         );
         assert!(of("put the apple near the fridge").relations.is_empty());
         assert!(of("take the apple from the fridge").relations.is_empty());
+        // A word for heating says to switch on the appliance it is done in (the microwave, 15),
+        // named after it or, where nothing is, before it; with none named it says nothing.
+        let heat = of("heat the milk in the microwave");
+        assert_eq!((heat.said, heat.relations), (vec![(15, Verb::SwitchOn)], vec![(13, Relation::Inside, 15)]));
+        assert_eq!(of("put the milk in the microwave and warm it up").said, [(15, Verb::SwitchOn)]);
+        assert_eq!(of("put the milk in the microwave to heat").said, [(15, Verb::SwitchOn)]);
+        assert!(of("heat the milk").said.is_empty() && of("put the milk in the fridge and heat the bread").said.is_empty());
     }
 
     #[test]

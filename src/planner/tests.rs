@@ -1532,6 +1532,22 @@ fn a_word_for_a_kind_in_the_plural_means_each_of_its_things() {
 }
 
 #[test]
+fn a_word_for_heating_switches_on_the_appliance_it_is_done_in() {
+    // "Heat" is no verb of the embodiment: the words say the milk goes in the microwave and the
+    // microwave is switched on, so a model that would stop once the milk is in goes on to that.
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: milk is INSIDE to microwave", "done"].iter().map(|s| s.to_string()).collect();
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let req = PlanRequest::new("heat the milk in the microwave", vec![]);
+    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
+    let w = env.world().unwrap();
+    assert!(w.holds(&Fact::Edge { from: 13, relation: crate::world::vocab::Relation::Inside, to: 15 }), "{:?}", plan_lines(&out));
+    assert!(w.holds(&Fact::State { id: 15, state: crate::world::vocab::State::On }), "{:?}", plan_lines(&out));
+}
+
+#[test]
 fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     // READ took the book in the right hand; "character is HOLDS_RH to apple" then has no step
     // that makes it true (a grab fills the left hand), so the steps that put the book down are
