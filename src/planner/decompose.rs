@@ -130,13 +130,20 @@ impl Run<'_> {
                 Some(goals::Meaning::Fact(f)) => self.env.world().is_some_and(|w| w.holds(f)),
                 _ => false,
             };
-            self.goals
+            let open: Vec<String> = self
+                .goals
                 .lines
                 .iter()
                 .filter(|l| !st.tried.contains(l) && !self.goals.contradicts_taken(l) && !self.waits_for_its_hand(l, &st.tried))
                 .filter(|l| !(self.cfg.skip_held_lines && holds(l)))
                 .cloned()
-                .collect()
+                .collect();
+            // (nor an appliance's ON line while a line offered puts a thing in it: see
+            // `Goals::waits_for_a_thing_put_in`)
+            match self.env.world() {
+                Some(w) => open.iter().filter(|l| !self.goals.waits_for_a_thing_put_in(l, w, &open)).cloned().collect(),
+                None => open,
+            }
         } else {
             Vec::new()
         };

@@ -162,6 +162,20 @@ impl Goals {
             .any(|(l, m)| *m == right && !tried.contains(l) && !self.contradicts_taken(l))
     }
 
+    /// Whether `line` switches on a closed appliance that a line of `menu` not yet met puts a thing
+    /// in: the world opens nothing that is on ("SWITCHOFF … first"), so switching it on first
+    /// means switching it off, opening it and switching it on again ("put the bread in the
+    /// microwave and toast it": SmolLM2 took "microwave is ON" first, and the plan had seven
+    /// actions for five). The line is offered once the thing is in, or its line was taken.
+    pub fn waits_for_a_thing_put_in(&self, line: &str, w: &World, menu: &[String]) -> bool {
+        let Some(Meaning::Fact(Fact::State { id, state: State::On })) = self.meaning(line) else { return false };
+        let closed = w.node(*id).is_some_and(|n| n.properties.contains(Property::CanOpen)) && w.holds(&Fact::State { id: *id, state: State::Closed });
+        closed
+            && menu.iter().any(|l| {
+                matches!(self.meaning(l), Some(Meaning::Fact(f @ Fact::Edge { relation: Relation::Inside, to, .. })) if to == id && !w.holds(f))
+            })
+    }
+
     /// Whether the inferred lines `taken` so far only put the robot in a room or close to things
     /// while `menu` still offers a line about something else: walking into a room is on the way
     /// to what the words name there ("go to the toilet": into the bathroom first), not all of it,
@@ -614,6 +628,27 @@ impl Wording {
                 said_once.push(ids.iter().map(|&id| (id, Verb::SwitchOn)).collect());
             }
         }
+        // A thing carried "to" a place ("take the mug to the sink", "bring the glass to the
+        // sink", "take the radio to the chair") is taken there in hand: the place is walked to,
+        // as "walk to the sink" says (SmolLM2 turned to the sink, picked up the mug and stopped).
+        for pair in found.windows(2) {
+            let ((k, i, _), (j, _, to)) = (&pair[0], &pair[1]);
+            let mut b = *k;
+            while b > 0 && DETERMINERS.contains(&words[b - 1].as_str()) {
+                b -= 1;
+            }
+            let carried = b > 0 && CARRYING.contains(&words[b - 1].as_str());
+            let between = &words[*i..*j];
+            if carried && between.first().is_some_and(|x| x == "to") && only(&between[1..], &|x| DETERMINERS.contains(&x)) {
+                // (held on the way: "bring" and "carry" say it as "take" does)
+                if !said_once.iter().any(|once| once.iter().any(|&(id, v)| v == Verb::Grab && pair[0].2.contains(&id))) {
+                    said.extend(pair[0].2.iter().map(|&id| (id, Verb::Grab)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
+                    said_once.push(pair[0].2.iter().map(|&id| (id, Verb::Grab)).collect());
+                }
+                said.extend(to.iter().map(|&id| (id, Verb::Walk)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
+                said_once.push(to.iter().map(|&id| (id, Verb::Walk)).collect());
+            }
+        }
         // The relation the words say between each object named and the next ("A in B", "A on B").
         let relation_between = |(_, i, _): &(usize, usize, Vec<u32>), (j, _, _): &(usize, usize, Vec<u32>)| {
             let between = &words[*i..*j];
@@ -904,6 +939,10 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
 /// Words for heating a thing in or on an appliance (their longer forms too: "heating", "cooked"):
 /// what they ask of the appliance is that it be switched on.
 const HEATING: &[&str] = &["heat", "warm", "cook", "boil", "bake", "toast", "fry", "fried", "fries"];
+
+/// Words for carrying a thing somewhere ("take the mug to the sink").
+const CARRYING: &[&str] =
+    &["take", "takes", "taking", "took", "bring", "brings", "bringing", "brought", "carry", "carries", "carrying", "carried"];
 
 /// The words that put a thing in ("A in B") or on ("A on B") another.
 const INTO: &[&str] = &["in", "into", "inside"];
@@ -1397,6 +1436,12 @@ mod tests {
         assert_eq!(of("put the milk in the microwave and warm it up").said, [(15, Verb::SwitchOn)]);
         assert_eq!(of("put the milk in the microwave to heat").said, [(15, Verb::SwitchOn)]);
         assert!(of("heat the milk").said.is_empty() && of("put the milk in the fridge and heat the bread").said.is_empty());
+        // A thing carried to a place is taken there in hand: the mug (25) is taken and the sink
+        // (20) walked to; going to a place after taking a thing carries it nowhere in words.
+        let carry = of("take the mug to the sink");
+        assert_eq!((carry.said, carry.relations), (vec![(25, Verb::Grab), (20, Verb::Walk)], vec![]));
+        assert_eq!(of("bring the apple to the kitchen table").said, [(12, Verb::Grab), (18, Verb::Walk)]);
+        assert_eq!(of("take the mug and go to the sink").said, [(25, Verb::Grab)]);
     }
 
     #[test]
