@@ -515,10 +515,7 @@ impl Wording {
                 verbs.iter().any(|v| matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut));
             // (after "in" or "on", an article and one more word aside: "on the dinner table")
             let a_place = |j: usize| {
-                let mut i = j;
-                while i > 0 && DETERMINERS.contains(&words[i - 1].as_str()) {
-                    i -= 1;
-                }
+                let i = articles_before(&words, j);
                 let place_word = |x: &String| INTO.contains(&x.as_str()) || ONTO.contains(&x.as_str());
                 (i > 0 && place_word(&words[i - 1])) || (i > 1 && place_word(&words[i - 2]) && !says_a_verb(&words[i - 1]))
             };
@@ -585,10 +582,7 @@ impl Wording {
                 last += 1;
             }
             for (_, _, ids) in &found[first..=last] {
-                for &id in ids {
-                    said.extend(verbs.iter().map(|&v| (id, v)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
-                }
-                said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
+                say(&mut said, &mut said_once, ids, &verbs);
             }
         }
         // A word for heating says to switch on the appliance it is done in or on ("heat the milk
@@ -596,22 +590,19 @@ impl Wording {
         // no verb of the embodiment is "heat"). The appliance is the first thing named after the
         // word, before any other verb, that has a switch and holds things; or else the last such
         // thing named before it, where nothing is named after it ("put the pot on the stove to
-        // cook"; "put the milk in the fridge and heat the bread" asks nothing of the fridge). A word inside a name
-        // ("cooking pot") says nothing.
+        // cook"; "put the milk in the fridge and heat the bread" asks nothing of the fridge). A
+        // word inside a name ("cooking pot") says nothing.
+        let holds_things = |id: u32| {
+            w.node(id).is_some_and(|n| {
+                n.properties.contains(Property::HasSwitch) && (n.properties.contains(Property::Containers) || n.properties.contains(Property::Surfaces))
+            })
+        };
+        let appliance = |ids: &Vec<u32>| -> Vec<u32> { ids.iter().copied().filter(|&id| holds_things(id)).collect() };
         for k in 0..words.len() {
             let heating = HEATING.iter().any(|h| words[k].starts_with(h));
             if !heating || found.iter().any(|(j, end, _)| (*j..*end).contains(&k)) {
                 continue;
             }
-            let appliance = |ids: &Vec<u32>| -> Vec<u32> {
-                let holds_things = |id: u32| {
-                    w.node(id).is_some_and(|n| {
-                        n.properties.contains(Property::HasSwitch)
-                            && (n.properties.contains(Property::Containers) || n.properties.contains(Property::Surfaces))
-                    })
-                };
-                ids.iter().copied().filter(|&id| holds_things(id)).collect()
-            };
             let next_verb = (k + 1..words.len()).find(|&i| says_a_verb(&words[i])).unwrap_or(words.len());
             let after: Vec<&Vec<u32>> = found.iter().filter(|(j, _, _)| *j > k && *j < next_verb).map(|(_, _, ids)| ids).collect();
             let meant = if after.is_empty() {
@@ -620,33 +611,23 @@ impl Wording {
                 after.into_iter().map(appliance).find(|a| !a.is_empty())
             };
             if let Some(ids) = meant {
-                for &id in &ids {
-                    if !said.contains(&(id, Verb::SwitchOn)) {
-                        said.push((id, Verb::SwitchOn));
-                    }
-                }
-                said_once.push(ids.iter().map(|&id| (id, Verb::SwitchOn)).collect());
+                say(&mut said, &mut said_once, &ids, &[Verb::SwitchOn]);
             }
         }
         // A thing carried "to" a place ("take the mug to the sink", "bring the glass to the
         // sink", "take the radio to the chair") is taken there in hand: the place is walked to,
         // as "walk to the sink" says (SmolLM2 turned to the sink, picked up the mug and stopped).
         for pair in found.windows(2) {
-            let ((k, i, _), (j, _, to)) = (&pair[0], &pair[1]);
-            let mut b = *k;
-            while b > 0 && DETERMINERS.contains(&words[b - 1].as_str()) {
-                b -= 1;
-            }
+            let ((k, i, thing), (j, _, to)) = (&pair[0], &pair[1]);
+            let b = articles_before(&words, *k);
             let carried = b > 0 && CARRYING.contains(&words[b - 1].as_str());
             let between = &words[*i..*j];
             if carried && between.first().is_some_and(|x| x == "to") && only(&between[1..], &|x| DETERMINERS.contains(&x)) {
                 // (held on the way: "bring" and "carry" say it as "take" does)
-                if !said_once.iter().any(|once| once.iter().any(|&(id, v)| v == Verb::Grab && pair[0].2.contains(&id))) {
-                    said.extend(pair[0].2.iter().map(|&id| (id, Verb::Grab)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
-                    said_once.push(pair[0].2.iter().map(|&id| (id, Verb::Grab)).collect());
+                if !said_once.iter().any(|once| once.iter().any(|&(id, v)| v == Verb::Grab && thing.contains(&id))) {
+                    say(&mut said, &mut said_once, thing, &[Verb::Grab]);
                 }
-                said.extend(to.iter().map(|&id| (id, Verb::Walk)).filter(|p| !said.contains(p)).collect::<Vec<_>>());
-                said_once.push(to.iter().map(|&id| (id, Verb::Walk)).collect());
+                say(&mut said, &mut said_once, to, &[Verb::Walk]);
             }
         }
         // The relation the words say between each object named and the next ("A in B", "A on B").
@@ -804,6 +785,29 @@ impl Wording {
         }
         groups
     }
+}
+
+/// Records `verbs` said of the objects of one mention (one name, or "it"): each pair once in
+/// `said`, and in `said_once` one entry a verb.
+fn say(said: &mut Vec<(u32, Verb)>, said_once: &mut Vec<Vec<(u32, Verb)>>, ids: &[u32], verbs: &[Verb]) {
+    for &id in ids {
+        for &v in verbs {
+            if !said.contains(&(id, v)) {
+                said.push((id, v));
+            }
+        }
+    }
+    said_once.extend(verbs.iter().map(|&v| ids.iter().map(|&id| (id, v)).collect::<Vec<_>>()));
+}
+
+/// Where the articles right before word `j` begin ("put *the* mug": the index of "the"; `j` where
+/// there are none): the word before that is the one the noun phrase follows.
+fn articles_before(words: &[String], j: usize) -> usize {
+    let mut i = j;
+    while i > 0 && DETERMINERS.contains(&words[i - 1].as_str()) {
+        i -= 1;
+    }
+    i
 }
 
 /// Whether what undoes a thing said (`undo`: its opposite verb, with its object where it has one)

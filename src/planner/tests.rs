@@ -1532,18 +1532,24 @@ fn a_word_for_a_kind_in_the_plural_means_each_of_its_things() {
     assert_eq!(out.tree.nodes().filter(|n| n.text == "apple is INSIDE to fridge").count(), 1);
 }
 
+/// Plans `instruction` on the demo kitchen with the root setting its own goal lines, the model's
+/// threshold for `done` off; returns the outcome and the world after it.
+fn infer_on_demo(m: &mut Scripted, instruction: &str) -> (PlanOutcome, World) {
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let mut env = SimEnv::new(World::demo(), vec![]);
+    let out = plan(m, &mut env, &PlanRequest::new(instruction, vec![]), &cfg, &mut TraceWriter::sink());
+    let w = env.world().unwrap().clone();
+    (out, w)
+}
+
 #[test]
 fn a_word_for_heating_switches_on_the_appliance_it_is_done_in() {
     // "Heat" is no verb of the embodiment: the words say the milk goes in the microwave and the
     // microwave is switched on, so a model that would stop once the milk is in goes on to that.
     let mut m = Scripted::new(&[]);
     m.preferences = ["subgoal: milk is INSIDE to microwave", "done"].iter().map(|s| s.to_string()).collect();
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let mut env = SimEnv::new(World::demo(), vec![]);
-    let req = PlanRequest::new("heat the milk in the microwave", vec![]);
-    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    let (out, w) = infer_on_demo(&mut m, "heat the milk in the microwave");
     assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
-    let w = env.world().unwrap();
     assert!(w.holds(&Fact::Edge { from: 13, relation: crate::world::vocab::Relation::Inside, to: 15 }), "{:?}", plan_lines(&out));
     assert!(w.holds(&Fact::State { id: 15, state: crate::world::vocab::State::On }), "{:?}", plan_lines(&out));
 }
@@ -1554,12 +1560,8 @@ fn an_appliance_is_switched_on_after_the_thing_is_put_in_it() {
     // in: the microwave opens only when off, so the plan would switch it on, off, and on again.
     let mut m = Scripted::new(&[]);
     m.prefer = Some("subgoal: microwave is ON".to_string());
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let mut env = SimEnv::new(World::demo(), vec![]);
-    let req = PlanRequest::new("put the bread in the microwave and toast it", vec![]);
-    let out = plan(&mut m, &mut env, &req, &cfg, &mut TraceWriter::sink());
+    let (out, w) = infer_on_demo(&mut m, "put the bread in the microwave and toast it");
     assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
-    let w = env.world().unwrap();
     assert!(w.holds(&Fact::Edge { from: 14, relation: crate::world::vocab::Relation::Inside, to: 15 }), "{:?}", plan_lines(&out));
     assert!(w.holds(&Fact::State { id: 15, state: crate::world::vocab::State::On }), "{:?}", plan_lines(&out));
     let plan = plan_lines(&out);
@@ -1573,9 +1575,7 @@ fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     // offered, and then the grab.
     let mut m = Scripted::new(&["action: [DROP] <book> (34)", "action: [GRAB] <apple> (12)"]);
     m.preferences = ["subgoal: READ", "subgoal: character is HOLDS_RH to apple", "done"].iter().map(|s| s.to_string()).collect();
-    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let req = PlanRequest::new("read the book and pick up the apple", vec![]);
-    let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut TraceWriter::sink());
+    let (out, _) = infer_on_demo(&mut m, "read the book and pick up the apple");
     assert_eq!(out.stop, StopCause::Done, "{:?}", m.grammars);
     let plan = plan_lines(&out);
     assert_eq!(plan[plan.len() - 3..], ["[DROP] <book> (34)", "[WALK] <apple> (12)", "[GRAB] <apple> (12)"], "{plan:?}");
