@@ -417,6 +417,10 @@ impl Run<'_> {
                 // on a chair when asked to sit on the sofa).
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
                 let making = if alone { narrowed(making, on_named) } else { making };
+                // A liquid no hand can hold by itself (water) is poured, where pouring makes the
+                // line true, not put: VirtualHome's programs never put water anywhere.
+                let poured = |a: &&Action| a.verb == Verb::Pour && a.args.first().is_some_and(|o| !goals::can_be_held(w, o.id));
+                let making = narrowed(making, poured);
                 // And by a verb the instruction says of the object ("sit on the sofa": SIT, not
                 // LIE, for "character is ON to sofa").
                 narrowed(making, said_of)

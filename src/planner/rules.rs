@@ -252,6 +252,17 @@ pub(super) fn changes_nothing(now: &World, after: &World, a: &Action) -> bool {
     before.len() == then.len() && then.iter().all(|f| before.contains(f))
 }
 
+/// Whether all `a` does, run `now` (on the way from `start`), is to let go of what a hand holds
+/// and bring back what held at `start`: water poured where it already was (VirtualHome's houses
+/// keep the coffee maker's water inside it; the way to pour it takes it out in hand). Like a step
+/// that changes nothing, it brings about no line a goal can ask, only its verb.
+pub(super) fn only_lets_go(start: &World, now: &World, after: &World, a: &Action) -> bool {
+    let ids: Vec<u32> = a.args.iter().map(|o| o.id).collect();
+    let (before, then) = (now.facts_among(&ids), after.facts_among(&ids));
+    let hand = |f: &Fact| is_edge(f, &[Relation::HoldsRh, Relation::HoldsLh]);
+    then.iter().all(|f| before.contains(f) || start.holds(f)) && before.iter().all(|f| then.contains(f) || hand(f))
+}
+
 /// Whether `f` is an edge of one of these relations.
 pub(super) fn is_edge(f: &Fact, relations: &[Relation]) -> bool {
     matches!(f, Fact::Edge { relation, .. } if relations.contains(relation))

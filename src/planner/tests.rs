@@ -1535,8 +1535,13 @@ fn a_word_for_a_kind_in_the_plural_means_each_of_its_things() {
 /// Plans `instruction` on the demo kitchen with the root setting its own goal lines, the model's
 /// threshold for `done` off; returns the outcome and the world after it.
 fn infer_on_demo(m: &mut Scripted, instruction: &str) -> (PlanOutcome, World) {
+    infer_on(m, World::demo(), instruction)
+}
+
+/// As [`infer_on_demo`], on `world`.
+fn infer_on(m: &mut Scripted, world: World, instruction: &str) -> (PlanOutcome, World) {
     let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
-    let mut env = SimEnv::new(World::demo(), vec![]);
+    let mut env = SimEnv::new(world, vec![]);
     let out = plan(m, &mut env, &PlanRequest::new(instruction, vec![]), &cfg, &mut TraceWriter::sink());
     let w = env.world().unwrap().clone();
     (out, w)
@@ -1552,6 +1557,87 @@ fn a_word_for_heating_switches_on_the_appliance_it_is_done_in() {
     assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
     assert!(w.holds(&Fact::Edge { from: 13, relation: crate::world::vocab::Relation::Inside, to: 15 }), "{:?}", plan_lines(&out));
     assert!(w.holds(&Fact::State { id: 15, state: crate::world::vocab::State::On }), "{:?}", plan_lines(&out));
+}
+
+#[test]
+fn with_no_appliance_named_the_thing_heated_goes_in_the_one_it_is_heated_in() {
+    // "Heat the milk" names no appliance: the demo's microwave is the one milk is heated in, so
+    // the milk goes in and the microwave is switched on (SmolLM2 opened the milk and stopped).
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: milk is INSIDE to microwave", "subgoal: microwave is ON", "done"].iter().map(|s| s.to_string()).collect();
+    let (out, w) = infer_on_demo(&mut m, "heat the milk");
+    assert_eq!(out.stop, StopCause::Done, "{:?}", plan_lines(&out));
+    assert!(w.holds(&Fact::Edge { from: 13, relation: crate::world::vocab::Relation::Inside, to: 15 }), "{:?}", plan_lines(&out));
+    assert!(w.holds(&Fact::State { id: 15, state: crate::world::vocab::State::On }), "{:?}", plan_lines(&out));
+}
+
+#[test]
+fn what_is_cut_is_cut_with_a_knife_taken_first() {
+    // "Cut the bread" names no knife; the executor's CUT needs one held, and names it.
+    let mut m = Scripted::new(&["action: [GRAB] <knife> (24)", "action: [CUT] <bread> (14)"]);
+    m.preferences = ["subgoal: CUT", "done"].iter().map(|s| s.to_string()).collect();
+    let (out, w) = infer_on_demo(&mut m, "cut the bread");
+    let plan = plan_lines(&out);
+    assert_eq!(out.stop, StopCause::Done, "{plan:?}");
+    assert!(plan.iter().any(|a| a == "[CUT] <bread> (14)"), "{plan:?}");
+    assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(24) }), "{plan:?}");
+}
+
+/// The demo kitchen with water (40: POURABLE, DRINKABLE; no hand holds it by itself) in the room,
+/// inside `inside` where given, else on the kitchen counter.
+fn demo_with_water(inside: Option<u32>) -> World {
+    World::demo_edited(|g| {
+        g["nodes"].as_array_mut().unwrap().push(serde_json::json!({
+            "id": 40, "class_name": "water", "category": "Food",
+            "properties": ["POURABLE", "DRINKABLE"], "states": ["CLEAN"]
+        }));
+        let (relation, to) = match inside {
+            Some(id) => ("INSIDE", id),
+            None => ("ON", 11),
+        };
+        let edges = g["edges"].as_array_mut().unwrap();
+        edges.push(serde_json::json!({"from_id": 40, "relation_type": "INSIDE", "to_id": 1}));
+        edges.push(serde_json::json!({"from_id": 40, "relation_type": relation, "to_id": to}));
+    })
+}
+
+#[test]
+fn water_is_poured_where_pouring_makes_the_line_true_not_put() {
+    // A model that would PUTIN the water is offered only POUR under "water is INSIDE to sink":
+    // VirtualHome's programs pour water, and EAI's goals ask for the POUR.
+    let mut m = Scripted::new(&["action: [PUTIN] <water> (40) <sink> (20)"]);
+    m.preferences = ["subgoal: water is INSIDE to sink", "done"].iter().map(|s| s.to_string()).collect();
+    m.prefer = Some("action: [PUTIN] <water> (40) <sink> (20)".to_string());
+    let (out, w) = infer_on(&mut m, demo_with_water(None), "put the water in the sink");
+    let plan = plan_lines(&out);
+    assert!(w.holds(&Fact::Edge { from: 40, relation: crate::world::vocab::Relation::Inside, to: 20 }), "{plan:?}");
+    assert!(plan.iter().any(|a| a == "[POUR] <water> (40) <sink> (20)"), "{plan:?}");
+    assert!(!plan.iter().any(|a| a.starts_with("[PUTIN]") || a.starts_with("[PUTBACK]")), "{plan:?}");
+}
+
+#[test]
+fn pouring_water_where_it_already_is_is_offered_as_its_verb() {
+    // The water is in the sink at the start; pouring it there takes it out in hand and puts it
+    // back, so no line says it: the words' POUR is offered as an action line.
+    let w = demo_with_water(Some(20));
+    let focus = [40, 20];
+    let t = "pour the water into the sink";
+    let (c, said) = goals::candidates(&w, &focus, &[], Some(t), &focus, Some(&goals::Wording::of(&w, &focus, t)));
+    assert!(c.iter().any(|(l, _)| l == "POUR"), "{c:?}");
+    assert!(said.iter().any(|g| g == &["POUR".to_string()]), "{said:?}");
+}
+
+#[test]
+fn a_drink_the_words_pour_into_a_vessel_is_a_line() {
+    // The mug is no container, so nothing is put INSIDE it; a drink poured into it is, where the
+    // words say so (SmolLM2, offered no line for it, turned to the milk and stopped).
+    let w = World::demo();
+    let focus = [13, 25];
+    let lines = |t: &str| goals::candidates(&w, &focus, &[], Some(t), &focus, Some(&goals::Wording::of(&w, &focus, t)));
+    let (c, said) = lines("pour the milk into the mug");
+    assert!(said.iter().any(|g| g == &["milk is INSIDE to mug".to_string()]), "{c:?} {said:?}");
+    let (c, _) = lines("pick up the milk and the mug");
+    assert!(!c.iter().any(|(l, _)| l == "milk is INSIDE to mug"), "{c:?}");
 }
 
 #[test]

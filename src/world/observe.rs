@@ -211,6 +211,15 @@ impl World {
         out
     }
 
+    /// A knife (a class named with "knife": knife, cutlery_knife, chef_knife) among `ids`, or of
+    /// the whole scene where `ids` is `None`: one in `room` where there is one, else the first.
+    /// What CUT needs held.
+    pub fn a_knife(&self, ids: Option<&[u32]>, room: Option<u32>) -> Option<u32> {
+        let knife = |id: u32| ids.is_none_or(|ids| ids.contains(&id)) && self.node(id).is_some_and(|n| n.class_name.contains("knife"));
+        let knives: Vec<u32> = self.nodes().map(|n| n.id).filter(|&id| knife(id)).collect();
+        knives.iter().copied().find(|&k| room.is_some() && self.room_of(k) == room).or(knives.first().copied())
+    }
+
     /// Whether `fact` holds now.
     pub fn holds(&self, fact: &Fact) -> bool {
         match *fact {

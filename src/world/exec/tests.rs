@@ -469,7 +469,9 @@ fn squeeze_cut_eat() {
     ok(&mut w, Verb::Cut, &[("apple", 12)]);
     ok(&mut w, Verb::Eat, &[("apple", 12)]);
     fails(&w, Verb::Squeeze, &[("apple", 12)], Affordance, "cannot be squeezed");
-    fails(&g().near(12).world(), Verb::Cut, &[("apple", 12)], MissingStep, "GRAB a knife first");
+    // (the knife to take is named, so the way to a CUT can be found)
+    fails(&g().near(12).world(), Verb::Cut, &[("apple", 12)], MissingStep, "GRAB <knife> (91) first");
+    fails(&kitchen().near(12).world(), Verb::Cut, &[("apple", 12)], MissingStep, "GRAB a knife first (the scene has none)");
     fails(&g().holding(91).near(7).world(), Verb::Cut, &[("kitchencounter", 7)], Affordance, "is not food");
     fails(&g().world(), Verb::Eat, &[("apple", 12)], MissingStep, "not close");
     // A plate with food on it can be eaten from; an empty one cannot.

@@ -457,7 +457,14 @@ impl World {
         let c = self.char_ix();
         let has_knife = HANDS.iter().flat_map(|&h| self.targets(c, h)).any(|x| self.class_ix(x).contains("knife"));
         if !has_knife {
-            return Err(Fail::new(MissingStep, "the robot is not holding a knife; GRAB a knife first"));
+            // (naming one, in the robot's room where there is one, lets the way to a CUT be
+            // found: "cut the bread" is GRAB a knife first)
+            let knife = self.a_knife(None, self.room_of(self.character()));
+            let fix = match knife.and_then(|k| self.ix(k)) {
+                Some(k) => format!("GRAB {} first", self.lbl(k)),
+                None => "GRAB a knife first (the scene has none)".to_string(),
+            };
+            return Err(Fail::new(MissingStep, format!("the robot is not holding a knife; {fix}")));
         }
         Ok(vec![])
     }
