@@ -1105,10 +1105,27 @@ fn is_appliance(w: &World, id: u32) -> bool {
 /// heat it in, the first of the word's classes the scene has ([`HEATING`]; of several of that
 /// class, one in the thing's room).
 fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Option<(Vec<u32>, Vec<u32>)> {
-    if found.iter().any(|(_, _, ids)| ids.iter().any(|&id| is_appliance(w, id))) {
-        return None;
-    }
     let class = |id: u32| w.node(id).map(|n| n.class_name.to_lowercase().replace('_', "")).unwrap_or_default();
+    for (kinds, thing) in heated_with_no_appliance(w, words, found) {
+        let room = thing.first().and_then(|&id| w.room_of(id));
+        for kind in kinds.iter() {
+            let of_kind: Vec<u32> = focus.iter().copied().filter(|&id| class(id) == *kind && is_appliance(w, id)).collect();
+            if let Some(&first) = of_kind.first() {
+                let here = of_kind.iter().copied().find(|&id| room.is_some() && w.room_of(id) == room).unwrap_or(first);
+                return Some((thing, vec![here]));
+            }
+        }
+    }
+    None
+}
+
+/// The heating words of [`implied_heater`], where the words name no appliance: each word's
+/// appliance classes and the thing it heats.
+fn heated_with_no_appliance(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<(&'static [&'static str], Vec<u32>)> {
+    if found.iter().any(|(_, _, ids)| ids.iter().any(|&id| is_appliance(w, id))) {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
     for (k, word) in words.iter().enumerate() {
         let Some((_, kinds)) = HEATING.iter().find(|(h, _)| word.starts_with(h)) else { continue };
         if found.iter().any(|(j, end, _)| (*j..*end).contains(&k)) {
@@ -1122,16 +1139,34 @@ fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
         if words.get(*end).is_some_and(|x| INTO.contains(&x.as_str()) || ONTO.contains(&x.as_str())) {
             continue;
         }
-        let room = thing.first().and_then(|&id| w.room_of(id));
-        for kind in kinds.iter() {
-            let of_kind: Vec<u32> = focus.iter().copied().filter(|&id| class(id) == *kind && is_appliance(w, id)).collect();
-            if let Some(&first) = of_kind.first() {
-                let here = of_kind.iter().copied().find(|&id| room.is_some() && w.room_of(id) == room).unwrap_or(first);
-                return Some((thing.clone(), vec![here]));
-            }
-        }
+        out.push((*kinds, thing.clone()));
     }
-    None
+    out
+}
+
+/// What the words ask that the scene has nothing for: to cut with no knife, to heat a thing with
+/// no appliance named and none of the word's appliances in `focus`. Without a warning the plan
+/// ends short and says nothing of why ("cut the bread" turned to the bread): each says so, and
+/// the fix.
+pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
+    let words = words_of(text);
+    let found = mentions(w, focus, text);
+    let mut out = Vec::new();
+    if words.iter().any(|x| x == "cut" || x == "cuts") && w.a_knife(Some(focus), None).is_none() {
+        out.push(
+            "the instruction says to cut, and the scene has no knife, which CUT needs in hand: give a scene with one (--scene FILE)"
+                .to_string(),
+        );
+    }
+    let heated = heated_with_no_appliance(w, &words, &found);
+    if let Some((kinds, _)) = heated.first().filter(|_| implied_heater(w, focus, &words, &found).is_none()) {
+        out.push(format!(
+            "the instruction says to heat a thing and names nothing to heat it in, and the scene has no {}: \
+             say what to heat it in, or give a scene with one (--scene FILE)",
+            kinds.join(" or ")
+        ));
+    }
+    out
 }
 
 /// The words of `text` as [`mentions`] counts them: lower case, split at anything not a letter
@@ -1449,6 +1484,11 @@ mod tests {
             assert!(!words.said.contains(&(15, Verb::SwitchOn)) && !words.relations.iter().any(|r| r.2 == 15), "{t}: {words:?}");
             assert!(!named_in(&w, t).contains(&15), "{t}");
         }
+        // Where the scene has nothing for what the words ask, a warning says so.
+        assert!(missing_tools(&w, &all, "heat the milk").is_empty() && missing_tools(&w, &all, "cut the bread").is_empty());
+        let bare: Vec<u32> = all.iter().copied().filter(|&id| id != 15 && id != 24).collect();
+        let missing = missing_tools(&w, &bare, "heat the milk and cut the bread");
+        assert!(missing.len() == 2 && missing[0].contains("no knife") && missing[1].contains("no microwave or stove or oven"), "{missing:?}");
         // The words for cutting name a knife; a word that begins as "cut" does not.
         assert!(named_in(&w, "cut the bread").contains(&24));
         assert!(!named_in(&w, "eat the bread").contains(&24));
