@@ -360,8 +360,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !unknown.is_empty() {
         eprintln!("warning: {}", unknown_note(&unknown, &world));
     }
-    let focus: Vec<u32> = if req.focus.is_empty() { world.nodes().map(|n| n.id).collect() } else { req.focus.clone() };
-    for missing in crate::planner::goals::missing_tools(&world, &focus, &req.instruction) {
+    for missing in crate::planner::goals::missing_tools(&world, &req.focus_in(&world), &req.instruction) {
         eprintln!("warning: {missing}");
     }
     // An unwritable --dot path is found before the model loads, not after it (the tree is written at the end).

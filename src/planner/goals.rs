@@ -1075,17 +1075,15 @@ fn undoubled(word: &str) -> String {
 /// Where a word for heating names no appliance, the one it is done in is named too
 /// ([`implied_heater`]); where the words say to cut, a knife.
 pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
-    let found = mentions(w, focus, text);
+    let (words, found) = (words_of(text), mentions(w, focus, text));
     let mut named: Vec<u32> = found.iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
-    if let Some((_, heater)) = implied_heater(w, focus, &words_of(text), &found) {
+    if let Some((_, heater)) = implied_heater(w, focus, &words, &found) {
         named.extend(heater);
     }
     // What is cut is cut with a knife (the executor's CUT needs one held): where the words say
     // to cut and name none, a knife of `focus` is one of their objects, one in the room of the
     // first thing named where there is one ("cut the bread": SmolLM2 took the bread and stopped).
-    // (the word itself: "cutlery" and "cutting board" begin as CUT's name does)
-    let cut = words_of(text).iter().any(|x| x == "cut" || x == "cuts");
-    if cut && w.a_knife(Some(&named), None).is_none() {
+    if says_to_cut(&words) && w.a_knife(Some(&named), None).is_none() {
         named.extend(w.a_knife(Some(focus), named.first().and_then(|&id| w.room_of(id))));
     }
     focus.iter().copied().filter(|id| named.contains(id)).collect()
@@ -1105,14 +1103,20 @@ fn is_appliance(w: &World, id: u32) -> bool {
 /// heat it in, the first of the word's classes the scene has ([`HEATING`]; of several of that
 /// class, one in the thing's room).
 fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Option<(Vec<u32>, Vec<u32>)> {
+    heater_among(w, focus, &heated_with_no_appliance(w, words, found))
+}
+
+/// The first of `heated` (a thing and its word's appliance classes) with an appliance in `focus`:
+/// the thing and that appliance ([`implied_heater`]).
+fn heater_among(w: &World, focus: &[u32], heated: &[(&[&str], Vec<u32>)]) -> Option<(Vec<u32>, Vec<u32>)> {
     let class = |id: u32| w.node(id).map(|n| n.class_name.to_lowercase().replace('_', "")).unwrap_or_default();
-    for (kinds, thing) in heated_with_no_appliance(w, words, found) {
+    for (kinds, thing) in heated {
         let room = thing.first().and_then(|&id| w.room_of(id));
         for kind in kinds.iter() {
             let of_kind: Vec<u32> = focus.iter().copied().filter(|&id| class(id) == *kind && is_appliance(w, id)).collect();
             if let Some(&first) = of_kind.first() {
                 let here = of_kind.iter().copied().find(|&id| room.is_some() && w.room_of(id) == room).unwrap_or(first);
-                return Some((thing, vec![here]));
+                return Some((thing.clone(), vec![here]));
             }
         }
     }
@@ -1152,14 +1156,14 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
     let words = words_of(text);
     let found = mentions(w, focus, text);
     let mut out = Vec::new();
-    if words.iter().any(|x| x == "cut" || x == "cuts") && w.a_knife(Some(focus), None).is_none() {
+    if says_to_cut(&words) && w.a_knife(Some(focus), None).is_none() {
         out.push(
             "the instruction says to cut, and the scene has no knife, which CUT needs in hand: give a scene with one (--scene FILE)"
                 .to_string(),
         );
     }
     let heated = heated_with_no_appliance(w, &words, &found);
-    if let Some((kinds, _)) = heated.first().filter(|_| implied_heater(w, focus, &words, &found).is_none()) {
+    if let Some((kinds, _)) = heated.first().filter(|_| heater_among(w, focus, &heated).is_none()) {
         out.push(format!(
             "the instruction says to heat a thing and names nothing to heat it in, and the scene has no {}: \
              say what to heat it in, or give a scene with one (--scene FILE)",
@@ -1167,6 +1171,12 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
         ));
     }
     out
+}
+
+/// Whether the words say to cut: the word itself ("cutlery" and "cutting board" begin as CUT's
+/// name does, so [`names_verb`] would read them so).
+fn says_to_cut(words: &[String]) -> bool {
+    words.iter().any(|x| x == "cut" || x == "cuts")
 }
 
 /// The words of `text` as [`mentions`] counts them: lower case, split at anything not a letter

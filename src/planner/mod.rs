@@ -113,6 +113,16 @@ pub struct PlanRequest {
 }
 
 impl PlanRequest {
+    /// The objects the request is about in `w`: its focus, or where none is given the whole scene
+    /// (the character excluded).
+    pub fn focus_in(&self, w: &World) -> Vec<u32> {
+        if self.focus.is_empty() {
+            w.nodes().map(|n| n.id).filter(|&id| id != w.character()).collect()
+        } else {
+            self.focus.clone()
+        }
+    }
+
     pub fn new(instruction: impl Into<String>, focus: Vec<u32>) -> PlanRequest {
         PlanRequest {
             instruction: instruction.into(),

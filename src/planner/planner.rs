@@ -158,10 +158,9 @@ pub(crate) fn run_tree(
     cfg: &PlannerConfig,
     trace: &mut TraceWriter,
 ) -> PlanOutcome {
-    let focus = match (req.focus.is_empty(), env.world()) {
-        (false, _) | (true, None) => req.focus.clone(),
-        // No focus given: the whole scene (the character excluded).
-        (true, Some(w)) => w.nodes().map(|n| n.id).filter(|&id| id != w.character()).collect(),
+    let focus = match env.world() {
+        Some(w) => req.focus_in(w),
+        None => req.focus.clone(),
     };
     let focus_is_scene = env.world().is_some_and(|w| {
         let n = w.nodes().filter(|n| n.id != w.character()).count();
