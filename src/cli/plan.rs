@@ -223,11 +223,13 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
                     eprintln!("  [no goal lines: {why}]");
                 }
                 // What the words say, one thing a group: a line of each is taken before `done`.
+                let holding: Vec<&str> = v["holding"].as_array().into_iter().flatten().filter_map(Value::as_str).collect();
+                let marked = |l: &str| if holding.contains(&l) { format!("{l} (holds already)") } else { l.to_string() };
                 let said: Vec<String> = v["said"]
                     .as_array()
                     .into_iter()
                     .flatten()
-                    .map(|g| g.as_array().into_iter().flatten().filter_map(Value::as_str).collect::<Vec<_>>().join(" or "))
+                    .map(|g| g.as_array().into_iter().flatten().filter_map(Value::as_str).map(marked).collect::<Vec<_>>().join(" or "))
                     .collect();
                 if !said.is_empty() {
                     eprintln!("  [the words say: {}]", said.join("; "));

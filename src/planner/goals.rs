@@ -16,7 +16,7 @@ use crate::action::Verb;
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::{Property, Relation, State};
 use crate::world::affordance::slot_admits;
-use crate::world::{Fact, World};
+use crate::world::{Fact, Tool, World};
 
 /// What a candidate line asks for.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -389,6 +389,23 @@ pub fn candidates(
             out.retain(|(l, _)| said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
         }
     }
+    // Where every verb the words say is a move, and every thing they name is one they say to go
+    // to ("walk to the sofa"), the robot's postures and its place on or in a thing are not
+    // goals: SmolLM2 sat on the sofa it was to walk to. ("I walk into the bathroom and go to the
+    // toilet" is to use the toilet: "go" is no move said of it.)
+    let only_moves = wording.is_some_and(|words| {
+        let moves = |v: &Verb| matches!(v, Verb::Walk | Verb::Run | Verb::Find);
+        let gone_to = |id: &u32| words.said.iter().any(|(x, v)| x == id && moves(v));
+        let things: Vec<&u32> = named.iter().filter(|&&id| w.node(id).is_some_and(|n| !n.is_room())).collect();
+        words.verb_words.iter().flatten().all(moves) && !things.is_empty() && things.into_iter().all(gone_to)
+    });
+    if only_moves {
+        let on_a_thing = |m: &Meaning| {
+            matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to })
+                if *from == robot && !w.node(*to).is_some_and(|n| n.is_room()))
+        };
+        out.retain(|(l, m)| !robot_lines.iter().any(|(rl, _)| rl == l) && !on_a_thing(m));
+    }
     // A state that does not hold and that no action brings about (a door in no room cannot be
     // walked to and closed) is not a goal a plan can meet.
     out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::State { .. }) if !w.holds(f) && !made_by.iter().any(|(ml, _)| ml == l)));
@@ -490,6 +507,9 @@ pub struct Wording {
     /// The objects of each name the words give in the plural ("turn on the lights"): each of
     /// them is meant, not one.
     pub plural: Vec<Vec<u32>>,
+    /// A thing used where the robot sits, and the seat ("read the book on the sofa"): the thing
+    /// is not put there.
+    seated: Vec<(u32, u32)>,
 }
 
 impl Wording {
@@ -671,6 +691,40 @@ impl Wording {
                 relations_once.push(pairs);
             }
         }
+        // Things put away where the words say not where go where they are kept ("put away the
+        // groceries": SmolLM2 turned to the apple and stopped), each its own place.
+        for (thing, place) in implied_stores(w, focus, &words, &found) {
+            if !relations.iter().any(|(from, _, _)| *from == thing) {
+                relations.push((thing, Relation::Inside, place));
+                relations_once.push(vec![(thing, Relation::Inside, place)]);
+            }
+        }
+        // A thing the words say to use where the robot is ("read", "eat", "drink", "watch") "on"
+        // or "in" a seat is used by the robot sitting there: "read the book on the sofa" is to sit
+        // on the sofa and read (SmolLM2 read the book, then put it on the sofa). Where the thing
+        // is there already, the words say which one is meant and ask nothing of the seat.
+        let used_in_place = |x: u32| {
+            let verbs: Vec<Verb> = said.iter().filter(|(o, _)| *o == x).map(|(_, v)| *v).collect();
+            !verbs.is_empty() && verbs.iter().all(|v| USED_IN_PLACE.contains(v))
+        };
+        let seat = |id: u32| w.node(id).is_some_and(|n| n.properties.contains(Property::Sittable));
+        let mut seats: Vec<u32> = Vec::new();
+        let mut seated: Vec<(u32, u32)> = Vec::new();
+        for once in relations_once.iter_mut() {
+            once.retain(|&(from, relation, to)| {
+                let robots = used_in_place(from) && seat(to);
+                if robots && !w.holds(&Fact::Edge { from, relation, to }) {
+                    seats.extend(Some(to).filter(|t| !seats.contains(t)));
+                    seated.push((from, to));
+                }
+                !robots
+            });
+        }
+        relations_once.retain(|once| !once.is_empty());
+        relations.retain(|&(from, _, to)| !(used_in_place(from) && seat(to)));
+        if !seats.is_empty() {
+            say(&mut said, &mut said_once, &seats, &[Verb::Sit]);
+        }
         if let Some((thing, heater)) = implied {
             let holds_inside = heater.iter().all(|&id| w.node(id).is_some_and(|n| n.properties.contains(Property::Containers)));
             let relation = if holds_inside { Relation::Inside } else { Relation::On };
@@ -678,7 +732,7 @@ impl Wording {
             relations.extend(pairs.iter().copied());
             relations_once.push(pairs);
         }
-        Wording { said, relations, said_once, relations_once, verb_words, plural }
+        Wording { said, relations, said_once, relations_once, verb_words, plural, seated }
     }
 
     /// The verbs said of `id`.
@@ -748,6 +802,10 @@ impl Wording {
         for &(x, _, _) in self.relations.iter().filter(|(x, _, to)| can_be_held(w, *x) && !w.node(*to).is_some_and(|n| n.is_room())) {
             let verbs = self.verbs_of(x);
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
+        }
+        // A thing used on a seat is not put on it (SmolLM2 put the book it read on the chair).
+        for &(x, seat) in &self.seated {
+            out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to }) if *from == x && *to == seat));
         }
         // (Where the relation said holds already, the words cannot ask for it: the other
         // placement is what they can bring about. VirtualHome's houses keep dishes INSIDE the
@@ -906,6 +964,10 @@ const PHRASE_ENDS: &[&str] = &[
     "in", "into", "inside", "on", "onto", "to", "at", "from", "with", "under", "near", "by", "of", "for", "and", "or",
     "then", "off", "out", "up", "down", "back",
 ];
+
+/// The verbs that use a thing where the robot is, in hand or in place (what it does "on the
+/// sofa" is done sitting there).
+const USED_IN_PLACE: &[Verb] = &[Verb::Read, Verb::Eat, Verb::Drink, Verb::Watch, Verb::LookAt, Verb::Type];
 
 /// The verbs that wash something: what "clean" says, and what a CLEAN line needs the words to name.
 pub(super) const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse];
@@ -1073,18 +1135,22 @@ fn undoubled(word: &str) -> String {
 /// washing_machine, "table" for kitchentable), or, failing that, a few everyday words name a
 /// class of another name ("tv" for television, [`ALIASES`]). `(id)` names its object.
 /// Where a word for heating names no appliance, the one it is done in is named too
-/// ([`implied_heater`]); where the words say to cut, a knife.
+/// ([`implied_heater`]); where the words say to cut, a knife; to wipe, a cloth.
 pub fn instruction_objects(w: &World, focus: &[u32], text: &str) -> Vec<u32> {
     let (words, found) = (words_of(text), mentions(w, focus, text));
     let mut named: Vec<u32> = found.iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
     if let Some((_, heater)) = implied_heater(w, focus, &words, &found) {
         named.extend(heater);
     }
-    // What is cut is cut with a knife (the executor's CUT needs one held): where the words say
-    // to cut and name none, a knife of `focus` is one of their objects, one in the room of the
-    // first thing named where there is one ("cut the bread": SmolLM2 took the bread and stopped).
-    if says_to_cut(&words) && w.a_knife(Some(&named), None).is_none() {
-        named.extend(w.a_knife(Some(focus), named.first().and_then(|&id| w.room_of(id))));
+    named.extend(implied_stores(w, focus, &words, &found).into_iter().map(|(_, place)| place));
+    // What is cut is cut with a knife (the executor's CUT needs one held), what is wiped with a
+    // cloth: where the words say to and name none, one of `focus` is one of their objects, one in
+    // the room of the first thing named where there is one ("cut the bread": SmolLM2 took the
+    // bread and stopped; "wipe the counter": it turned to the counter).
+    for tool in tools_said(&words) {
+        if w.a_tool(tool, Some(&named), None).is_none() {
+            named.extend(w.a_tool(tool, Some(focus), named.first().and_then(|&id| w.room_of(id))));
+        }
     }
     focus.iter().copied().filter(|id| named.contains(id)).collect()
 }
@@ -1104,6 +1170,53 @@ fn is_appliance(w: &World, id: u32) -> bool {
 /// class, one in the thing's room).
 fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Option<(Vec<u32>, Vec<u32>)> {
     heater_among(w, focus, &heated_with_no_appliance(w, words, found))
+}
+
+/// Where the words say to put things away and not where ("put away the groceries", "put the
+/// plate away", "store the milk"): each thing with the place it is kept in ([`store_for`]). A
+/// place said after "away" ("put the plate away in the cabinet") is the words' own relation.
+fn implied_stores(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<(u32, u32)> {
+    let is = |i: usize, forms: &[&str]| words.get(i).is_some_and(|x| forms.contains(&x.as_str()));
+    let place_word = |i: usize| is(i, INTO) || is(i, ONTO);
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    for k in 0..words.len() {
+        let next_verb = (k + 1..words.len()).find(|&i| says_a_verb(&words[i]) || place_word(i)).unwrap_or(words.len());
+        if is(k, &["put", "puts", "putting"]) && is(k + 1, &["away"]) {
+            spans.push((k + 2, next_verb.max(k + 2)));
+        } else if is(k, &["store", "stores", "storing"]) {
+            spans.push((k + 1, next_verb));
+        } else if is(k, &["put", "puts", "putting"]) {
+            if let Some(a) = (k + 1..next_verb).find(|&i| is(i, &["away"])).filter(|&a| !place_word(a + 1)) {
+                spans.push((k + 1, a));
+            }
+        }
+    }
+    // (a thing inside something that opens is put away already: the plate in the cabinet)
+    let stored = |id: u32| w.related(id, Relation::Inside).iter().any(|&c| w.node(c).is_some_and(|n| n.properties.contains(Property::CanOpen)));
+    let mut out = Vec::new();
+    for (from, to) in spans {
+        for (_, _, ids) in found.iter().filter(|(j, end, _)| *j >= from && *end <= to) {
+            for &id in ids.iter().filter(|&&id| can_be_held(w, id) && !stored(id)) {
+                if let Some(place) = store_for(w, focus, id) {
+                    out.push((id, place));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Where `thing` is put away: food and drink in a fridge (or freezer), anything else in a
+/// cupboard (a container that opens and has no switch: a kitchen cabinet, a drawer), of `focus`,
+/// one in the thing's room where there is one.
+fn store_for(w: &World, focus: &[u32], thing: u32) -> Option<u32> {
+    let has = |id: u32, p: Property| w.node(id).is_some_and(|n| n.properties.contains(p));
+    let food = has(thing, Property::Eatable) || has(thing, Property::Drinkable);
+    let cold = |id: u32| w.node(id).is_some_and(|n| ["fridge", "freezer"].iter().any(|c| n.class_name.to_lowercase().contains(c)));
+    let cupboard = |id: u32| has(id, Property::CanOpen) && has(id, Property::Containers) && !has(id, Property::HasSwitch);
+    let fits: Vec<u32> = focus.iter().copied().filter(|&id| id != thing && if food { cold(id) } else { cupboard(id) }).collect();
+    let room = w.room_of(thing);
+    fits.iter().copied().find(|&id| room.is_some() && w.room_of(id) == room).or(fits.first().copied())
 }
 
 /// The first of `heated` (a thing and its word's appliance classes) with an appliance in `focus`:
@@ -1156,7 +1269,7 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
     let words = words_of(text);
     let found = mentions(w, focus, text);
     let mut out = Vec::new();
-    if says_to_cut(&words) && w.a_knife(Some(focus), None).is_none() {
+    if tools_said(&words).contains(&Tool::Knife) && w.a_tool(Tool::Knife, Some(focus), None).is_none() {
         out.push(
             "the instruction says to cut, and the scene has no knife, which CUT needs in hand: give a scene with one (--scene FILE)"
                 .to_string(),
@@ -1173,10 +1286,18 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
     out
 }
 
-/// Whether the words say to cut: the word itself ("cutlery" and "cutting board" begin as CUT's
-/// name does, so [`names_verb`] would read them so).
-fn says_to_cut(words: &[String]) -> bool {
-    words.iter().any(|x| x == "cut" || x == "cuts")
+/// The tools the words say a verb needs: a knife to cut, a cloth to wipe. The words themselves
+/// ("cutlery" and "cutting board" begin as CUT's name does, so [`names_verb`] would read them so).
+fn tools_said(words: &[String]) -> Vec<Tool> {
+    let says = |forms: &[&str]| words.iter().any(|x| forms.contains(&x.as_str()));
+    let mut out = Vec::new();
+    if says(&["cut", "cuts"]) {
+        out.push(Tool::Knife);
+    }
+    if says(&["wipe", "wipes", "wiped", "wiping"]) {
+        out.push(Tool::Cloth);
+    }
+    out
 }
 
 /// The words of `text` as [`mentions`] counts them: lower case, split at anything not a letter
@@ -1389,7 +1510,7 @@ mod tests {
         assert_eq!(names("put the remote control on the coffee table"), [32, 33]);
         assert_eq!(names("put the mug on the kitchen table"), [18, 25]);
         // A word no whole name takes: the names that end with it.
-        assert_eq!(names("wipe the tables"), [18, 33]);
+        assert_eq!(names("clean the tables"), [18, 33]);
         assert_eq!(names("hand me (14)"), [14]);
         assert!(names("do the chores").is_empty());
         // Everyday words for a class of another name.
@@ -1454,7 +1575,7 @@ mod tests {
         assert_eq!(names("turn on the light in the kitchen"), [1, 23]);
         assert_eq!(names("walk to the living room and read a book"), [2, 34]);
         // A name of two words stays the object's.
-        assert_eq!(names("wipe the kitchen counter"), [11]);
+        assert_eq!(names("clean the kitchen counter"), [11]);
     }
 
     #[test]
@@ -1504,6 +1625,61 @@ mod tests {
         assert!(!named_in(&w, "eat the bread").contains(&24));
         // What is brought is held.
         assert_eq!(Wording::of(&w, &all, "bring me the remote").said, [(32, Verb::Grab)]);
+    }
+
+    #[test]
+    fn a_thing_used_on_a_seat_is_used_sitting_there_and_a_walk_asks_no_posture() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let lines = |t: &str| -> (Vec<String>, Vec<Vec<String>>) {
+            let named = instruction_objects(&w, &all, t);
+            let words = Wording::of(&w, &all, t);
+            let (c, said) = candidates(&w, &all, &[], Some(t), &named, Some(&words));
+            (c.into_iter().map(|(l, _)| l).collect(), said)
+        };
+        // The book (34) read on the sofa (30), the chair (19): the robot sits there, the book is
+        // not put there.
+        for (t, seat) in [("read the book on the sofa", "sofa"), ("read a book on the chair", "chair")] {
+            let (c, said) = lines(t);
+            let on_seat = format!("character is ON to {seat}");
+            assert!(said.iter().any(|g| g.contains(&on_seat)), "{t}: {said:?}");
+            assert!(!c.iter().any(|l| *l == format!("book is ON to {seat}")), "{t}: {c:?}");
+        }
+        // Put there, it is put there; read where it is, nothing of the seat is said.
+        let (c, said) = lines("put the book on the sofa");
+        assert!(c.iter().any(|l| l == "book is ON to sofa") && !said.iter().flatten().any(|l| l.starts_with("character is ON")), "{said:?}");
+        let (_, said) = lines("read the book on the coffee table");
+        assert!(!said.iter().flatten().any(|l| l.starts_with("character is ON")), "{said:?}");
+        // Walked to, the sofa is no place to sit or lie (SmolLM2 sat down on it); said, it is.
+        let (walk, said) = lines("walk to the sofa");
+        assert_eq!(said, [["character is CLOSE to sofa"]]);
+        assert!(!walk.iter().any(|l| l == "character is SITTING" || l == "character is ON to sofa"), "{walk:?}");
+        let (sit, _) = lines("walk to the sofa and sit on it");
+        assert!(sit.iter().any(|l| l == "character is SITTING") && sit.iter().any(|l| l == "character is ON to sofa"), "{sit:?}");
+        // A thing named and not gone to keeps them: "walk to the kitchen and go to the sofa".
+        let (go, _) = lines("walk to the kitchen and go to the sofa");
+        assert!(go.iter().any(|l| l == "character is SITTING"), "{go:?}");
+        // The words for wiping name a cloth (the rag, 26), as those for cutting a knife.
+        assert!(named_in(&w, "wipe the kitchen counter").contains(&26));
+        assert!(!named_in(&w, "put the kitchen counter in order").contains(&26));
+    }
+
+    #[test]
+    fn things_put_away_go_where_they_are_kept() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let inside = |t: &str| Wording::of(&w, &all, t).relations;
+        // Food and drink in the fridge (10), each of the groceries; anything else in the kitchen
+        // cabinet (16); the words' own place where they say one.
+        assert_eq!(inside("put away the groceries"), [(12, Relation::Inside, 10), (13, Relation::Inside, 10), (14, Relation::Inside, 10)]);
+        assert_eq!(inside("store the milk"), [(13, Relation::Inside, 10)]);
+        assert_eq!(inside("put the book away"), [(34, Relation::Inside, 16)]);
+        assert_eq!(inside("put away the book in the fridge"), [(34, Relation::Inside, 10)]);
+        assert!(named_in(&w, "put away the groceries").contains(&10) && named_in(&w, "put the book away").contains(&16));
+        // The plate is in the cabinet already: put away, it asks nothing; "put" alone, no store.
+        assert!(inside("put the plate away").is_empty());
+        assert!(inside("put the book on the sofa").iter().all(|r| r.2 == 30));
+        assert!(!named_in(&w, "put the apple on the plate").contains(&10));
     }
 
     #[test]

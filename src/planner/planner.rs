@@ -19,7 +19,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::decompose::{with_holders, Proposed};
-use super::goals::{self, Goals, Wording};
+use super::goals::{self, Goals, Meaning, Wording};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter, StateLog};
 use super::rules::new_facts;
@@ -267,7 +267,11 @@ impl Run<'_> {
         self.uninstructed = self.cfg.calibrate_lines.then(|| self.prompter.without_instruction());
         // (with the things the words say, a group each: the root takes a line of each before it
         // may be done)
-        self.trace.event("goal_candidates", json!({"lines": self.goals.lines, "said": self.goals.said}));
+        // (and which of those hold already: a user asking for what is so is told, not shown an
+        // empty plan alone)
+        let holding: Vec<&String> =
+            self.goals.said.iter().flatten().filter(|l| matches!(self.goals.meaning(l), Some(Meaning::Fact(f)) if w.holds(f))).collect();
+        self.trace.event("goal_candidates", json!({"lines": self.goals.lines, "said": self.goals.said, "holding": holding}));
     }
 
     /// Puts the prompts' shared beginning in the model's cache before the first call: the system

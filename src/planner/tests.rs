@@ -1576,6 +1576,37 @@ fn what_is_cut_is_cut_with_a_knife_taken_first() {
     assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(24) }), "{plan:?}");
 }
 
+#[test]
+fn what_is_wiped_is_wiped_with_a_cloth_taken_first() {
+    // "Wipe the kitchen counter" names no cloth; the executor's WIPE needs one held, and names
+    // the demo's rag (SmolLM2 turned to the counter and stopped).
+    let mut m = Scripted::new(&["action: [GRAB] <rag> (26)", "action: [WIPE] <kitchencounter> (11)"]);
+    m.preferences = ["subgoal: WIPE", "done"].iter().map(|s| s.to_string()).collect();
+    let (out, w) = infer_on_demo(&mut m, "wipe the kitchen counter");
+    let plan = plan_lines(&out);
+    assert_eq!(out.stop, StopCause::Done, "{plan:?}");
+    assert!(plan.iter().any(|a| a == "[WIPE] <kitchencounter> (11)"), "{plan:?}");
+    assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(26) }), "{plan:?}");
+}
+
+#[test]
+fn what_the_words_ask_that_holds_already_is_traced_as_holding() {
+    // The demo's microwave is closed: "close the microwave" asks nothing, and the trace (what
+    // `step plan` prints) says it holds already, beside an empty plan.
+    let cfg = PlannerConfig { infer_goals: true, lines_done_at: None, ..defaults() };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.jsonl");
+    for (instruction, holding) in [("close the microwave", vec!["microwave is CLOSED"]), ("open the microwave", vec![])] {
+        let mut trace = TraceWriter::create(&path).unwrap();
+        let mut env = SimEnv::new(World::demo(), vec![]);
+        plan(&mut Scripted::new(&[]), &mut env, &PlanRequest::new(instruction, vec![]), &cfg, &mut trace);
+        drop(trace);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let event = text.lines().map(|l| serde_json::from_str::<Value>(l).unwrap()).find(|e| e["event"] == "goal_candidates").unwrap();
+        assert_eq!(event["holding"], serde_json::json!(holding), "{instruction}: {event}");
+    }
+}
+
 /// The demo kitchen with water (40: POURABLE, DRINKABLE; no hand holds it by itself) in the room,
 /// inside `inside` where given, else on the kitchen counter.
 fn demo_with_water(inside: Option<u32>) -> World {

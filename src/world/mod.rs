@@ -24,7 +24,7 @@ pub mod vocab;
 pub use demo::{demo_kitchen, DEMO_KITCHEN_JSON};
 pub use exec::{Connective, Effects, ExecFailure, Fact, FailureKind, Missing};
 pub use graph::{parse_scene, read_scene, Edge, Graph, GraphError, Node, SceneFile};
-pub use observe::ObjectInfo;
+pub use observe::{ObjectInfo, Tool};
 pub use state::{NodeView, World};
 pub use step::StepResult;
 pub use vocab::{Property, PropertySet, Relation, State, StateSet};

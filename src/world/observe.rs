@@ -211,13 +211,13 @@ impl World {
         out
     }
 
-    /// A knife (a class named with "knife": knife, cutlery_knife, chef_knife) among `ids`, or of
-    /// the whole scene where `ids` is `None`: one in `room` where there is one, else the first.
-    /// What CUT needs held.
-    pub fn a_knife(&self, ids: Option<&[u32]>, room: Option<u32>) -> Option<u32> {
-        let knife = |id: u32| ids.is_none_or(|ids| ids.contains(&id)) && self.node(id).is_some_and(|n| n.class_name.contains("knife"));
-        let knives: Vec<u32> = self.nodes().map(|n| n.id).filter(|&id| knife(id)).collect();
-        knives.iter().copied().find(|&k| room.is_some() && self.room_of(k) == room).or(knives.first().copied())
+    /// A `tool` among `ids`, or of the whole scene where `ids` is `None`: one in `room` where
+    /// there is one, else the first. What CUT needs held (a knife), or what WIPE is done with (a
+    /// cloth).
+    pub fn a_tool(&self, tool: Tool, ids: Option<&[u32]>, room: Option<u32>) -> Option<u32> {
+        let is_one = |id: u32| ids.is_none_or(|ids| ids.contains(&id)) && self.node(id).is_some_and(|n| tool.is_class(n.class_name));
+        let all: Vec<u32> = self.nodes().map(|n| n.id).filter(|&id| is_one(id)).collect();
+        all.iter().copied().find(|&k| room.is_some() && self.room_of(k) == room).or(all.first().copied())
     }
 
     /// Whether `fact` holds now.
@@ -278,6 +278,29 @@ fn bounded(lines: Vec<String>, budget: usize) -> String {
         out.push('\n');
     }
     out
+}
+
+/// A thing a verb is done with, known by its class.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tool {
+    /// What CUT needs held: a class named with "knife" (knife, cutlery_knife, chef_knife).
+    Knife,
+    /// What WIPE is done with (the executor takes anything held; VirtualHome's programs wipe
+    /// with a towel or a rag).
+    Cloth,
+}
+
+impl Tool {
+    /// VirtualHome's classes of cloths (not "towel_rack", "table_cloth" or clothes).
+    const CLOTHS: &'static [&'static str] = &["rag", "towel", "sponge", "paper_towel", "dish_cloth", "cloth_napkin"];
+
+    /// Whether an object of `class` is such a tool.
+    pub fn is_class(self, class: &str) -> bool {
+        match self {
+            Tool::Knife => class.contains("knife"),
+            Tool::Cloth => Tool::CLOTHS.contains(&class),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -22,6 +22,7 @@
 
 use std::collections::BTreeMap;
 
+use super::observe::Tool;
 use super::state::{Ix, World};
 use super::vocab::{Property, Relation, State};
 use crate::action::{Action, ObjRef, Verb};

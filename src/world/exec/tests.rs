@@ -377,6 +377,10 @@ fn wipe_wash_rinse_scrub_clean_things() {
     let fx = ok(&mut w, Verb::Wipe, &[("table", 70)]);
     assert_eq!((fx.states_added, fx.states_removed), (vec![(70, State::Clean)], vec![(70, State::Dirty)]));
     fails(&g().near(70).world(), Verb::Wipe, &[("table", 70)], MissingStep, "holds nothing to wipe with");
+    // (a cloth to take is named, so the way to a WIPE can be found)
+    fails(&g().near(70).world(), Verb::Wipe, &[("table", 70)], MissingStep, "GRAB <rag> (71) first");
+    let bare = kitchen().obj(70, "table", &["SURFACES"], &["DIRTY"]).near(70).world();
+    fails(&bare, Verb::Wipe, &[("table", 70)], MissingStep, "GRAB a cloth (e.g. a rag or towel) first");
     fails(&g().world(), Verb::Wipe, &[("table", 70)], MissingStep, "not close");
     for v in [Verb::Wash, Verb::Rinse, Verb::Scrub] {
         let mut w = g().near(70).world();

@@ -269,12 +269,16 @@ impl World {
     pub(super) fn wipe(&self, node: Ix) -> Check {
         self.need_close(node)?;
         if self.hands_free() {
-            return Err(Fail::new(
-                MissingStep,
-                "the robot holds nothing to wipe with; GRAB a cloth (e.g. a rag or towel) first",
-            )
-            .needs(false, Fact::Holds { from: self.character(), to: None })
-            .connective(Connective::Any));
+            // (anything held wipes; naming a cloth, in the robot's room where there is one, lets
+            // the way to a WIPE be found: "wipe the counter" is GRAB the rag first)
+            let cloth = self.a_tool(Tool::Cloth, None, self.room_of(self.character())).and_then(|k| self.ix(k));
+            let fix = match cloth {
+                Some(k) => format!("GRAB {} first", self.lbl(k)),
+                None => "GRAB a cloth (e.g. a rag or towel) first".to_string(),
+            };
+            return Err(Fail::new(MissingStep, format!("the robot holds nothing to wipe with; {fix}"))
+                .needs(false, Fact::Holds { from: self.character(), to: None })
+                .connective(Connective::Any));
         }
         Ok(clean(node))
     }
@@ -459,7 +463,7 @@ impl World {
         if !has_knife {
             // (naming one, in the robot's room where there is one, lets the way to a CUT be
             // found: "cut the bread" is GRAB a knife first)
-            let knife = self.a_knife(None, self.room_of(self.character()));
+            let knife = self.a_tool(Tool::Knife, None, self.room_of(self.character()));
             let fix = match knife.and_then(|k| self.ix(k)) {
                 Some(k) => format!("GRAB {} first", self.lbl(k)),
                 None => "GRAB a knife first (the scene has none)".to_string(),
