@@ -271,13 +271,13 @@ impl World {
         if self.hands_free() {
             // (anything held wipes; naming a cloth, in the robot's room where there is one, lets
             // the way to a WIPE be found: "wipe the counter" is GRAB the rag first)
-            let cloth = self.a_tool(Tool::Cloth, None, self.room_of(self.character())).and_then(|k| self.ix(k));
-            let fix = match cloth {
+            let cloth = self.a_tool(Tool::Cloth, None, self.room_of(self.character()));
+            let fix = match cloth.and_then(|k| self.ix(k)) {
                 Some(k) => format!("GRAB {} first", self.lbl(k)),
                 None => "GRAB a cloth (e.g. a rag or towel) first".to_string(),
             };
             return Err(Fail::new(MissingStep, format!("the robot holds nothing to wipe with; {fix}"))
-                .needs(false, Fact::Holds { from: self.character(), to: None })
+                .needs(false, Fact::Holds { from: self.character(), to: cloth })
                 .connective(Connective::Any));
         }
         Ok(clean(node))
