@@ -969,7 +969,8 @@ const PHRASE_ENDS: &[&str] = &[
 /// sofa" is done sitting there).
 const USED_IN_PLACE: &[Verb] = &[Verb::Read, Verb::Eat, Verb::Drink, Verb::Watch, Verb::LookAt, Verb::Type];
 
-/// The verbs that wash something: what "clean" says, and what a CLEAN line needs the words to name.
+/// The verbs that wash something: what a CLEAN line needs the words to name ("clean" says all but
+/// WIPE, [`VERB_PHRASES`]).
 pub(super) const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb::Rinse];
 
 /// Everyday phrases for the embodiment's verbs that do not begin with the verb's name ("pick up
