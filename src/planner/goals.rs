@@ -1178,6 +1178,12 @@ fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
 /// plate away", "store the milk"): each thing with the place it is kept in ([`store_for`]). A
 /// place said after "away" ("put the plate away in the cabinet") is the words' own relation.
 fn implied_stores(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<(u32, u32)> {
+    put_away(w, words, found).into_iter().filter_map(|id| store_for(w, focus, id).map(|place| (id, place))).collect()
+}
+
+/// The things the words say to put away and not where ([`implied_stores`]), where they are not
+/// put away already.
+fn put_away(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<u32> {
     let is = |i: usize, forms: &[&str]| words.get(i).is_some_and(|x| forms.contains(&x.as_str()));
     let place_word = |i: usize| is(i, INTO) || is(i, ONTO);
     let mut spans: Vec<(usize, usize)> = Vec::new();
@@ -1199,8 +1205,8 @@ fn implied_stores(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
     for (from, to) in spans {
         for (_, _, ids) in found.iter().filter(|(j, end, _)| *j >= from && *end <= to) {
             for &id in ids.iter().filter(|&&id| can_be_held(w, id) && !stored(id)) {
-                if let Some(place) = store_for(w, focus, id) {
-                    out.push((id, place));
+                if !out.contains(&id) {
+                    out.push(id);
                 }
             }
         }
@@ -1263,8 +1269,9 @@ fn heated_with_no_appliance(w: &World, words: &[String], found: &[(usize, usize,
     out
 }
 
-/// What the words ask that the scene has nothing for: to cut with no knife, to heat a thing with
-/// no appliance named and none of the word's appliances in `focus`. Without a warning the plan
+/// What the words ask that the scene has nothing for: to cut with no knife, to wipe with no
+/// cloth, to put a thing away where nothing can keep it, to heat a thing with no appliance named
+/// and none of the word's appliances in `focus`. Without a warning the plan
 /// ends short and says nothing of why ("cut the bread" turned to the bread): each says so, and
 /// the fix.
 pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
@@ -1276,6 +1283,22 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
             "the instruction says to cut, and the scene has no knife, which CUT needs in hand: give a scene with one (--scene FILE)"
                 .to_string(),
         );
+    }
+    if tools_said(&words).contains(&Tool::Cloth) && w.a_tool(Tool::Cloth, Some(focus), None).is_none() {
+        out.push(
+            "the instruction says to wipe, and the scene has no cloth (a rag, towel or sponge) to wipe with: give a scene with one (--scene FILE)"
+                .to_string(),
+        );
+    }
+    let homeless: Vec<&str> =
+        put_away(w, &words, &found).into_iter().filter(|&id| store_for(w, focus, id).is_none()).filter_map(|id| w.node(id).map(|n| n.class_name)).collect();
+    if !homeless.is_empty() {
+        out.push(format!(
+            "the instruction says to put away {} and not where, and the scene has nowhere to keep {it} (a fridge or freezer \
+             for food and drink, a cupboard that opens for other things): say where to put {it}, or give a scene with one (--scene FILE)",
+            homeless.join(", "),
+            it = if homeless.len() > 1 { "them" } else { "it" }
+        ));
     }
     let heated = heated_with_no_appliance(w, &words, &found);
     if let Some((kinds, _)) = heated.first().filter(|_| heater_among(w, focus, &heated).is_none()) {
@@ -1664,6 +1687,9 @@ mod tests {
         // The words for wiping name a cloth (the rag, 26), as those for cutting a knife.
         assert!(named_in(&w, "wipe the kitchen counter").contains(&26));
         assert!(!named_in(&w, "put the kitchen counter in order").contains(&26));
+        assert!(missing_tools(&w, &all, "wipe the kitchen counter").is_empty());
+        let bare: Vec<u32> = all.iter().copied().filter(|&id| id != 26).collect();
+        assert!(missing_tools(&w, &bare, "wipe the kitchen counter").iter().any(|m| m.contains("no cloth")));
         // "Clean" says the washing verbs but WIPE, which a cloth at hand would let be done to
         // anything near (SmolLM2 wiped the rag for "clean the plate with the rag").
         let clean = Wording::of(&w, &all, "clean the plate with the rag");
@@ -1686,6 +1712,11 @@ mod tests {
         assert!(inside("put the plate away").is_empty());
         assert!(inside("put the book on the sofa").iter().all(|r| r.2 == 30));
         assert!(!named_in(&w, "put the apple on the plate").contains(&10));
+        // With nowhere to keep them, a warning says so, and the fix.
+        assert!(missing_tools(&w, &all, "put away the groceries").is_empty());
+        let bare: Vec<u32> = all.iter().copied().filter(|&id| id != 10 && id != 16).collect();
+        let missing = missing_tools(&w, &bare, "put away the groceries and the book");
+        assert!(missing.len() == 1 && missing[0].contains("put away apple, milk, bread, book") && missing[0].contains("keep them"), "{missing:?}");
     }
 
     #[test]
