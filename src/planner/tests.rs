@@ -1564,29 +1564,30 @@ fn a_word_for_heating_switches_on_the_appliance_it_is_done_in() {
     }
 }
 
+/// Plans `instruction` on the demo with a model that takes the verb's line, grabs `tool` and does
+/// `action`: the plan ends done, with `action` run and `tool` (its id) in hand.
+fn done_with_tool_taken_first(instruction: &str, verb: &str, tool: (&str, u32), action: &str) {
+    let grab = format!("action: [GRAB] <{}> ({})", tool.0, tool.1);
+    let mut m = Scripted::new(&[grab.as_str(), format!("action: {action}").as_str()]);
+    m.preferences = [format!("subgoal: {verb}"), "done".to_string()].into();
+    let (out, w) = infer_on_demo(&mut m, instruction);
+    let plan = plan_lines(&out);
+    assert_eq!(out.stop, StopCause::Done, "{instruction}: {plan:?}");
+    assert!(plan.iter().any(|a| a == action), "{instruction}: {plan:?}");
+    assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(tool.1) }), "{instruction}: {plan:?}");
+}
+
 #[test]
 fn what_is_cut_is_cut_with_a_knife_taken_first() {
     // "Cut the bread" names no knife; the executor's CUT needs one held, and names it.
-    let mut m = Scripted::new(&["action: [GRAB] <knife> (24)", "action: [CUT] <bread> (14)"]);
-    m.preferences = ["subgoal: CUT", "done"].iter().map(|s| s.to_string()).collect();
-    let (out, w) = infer_on_demo(&mut m, "cut the bread");
-    let plan = plan_lines(&out);
-    assert_eq!(out.stop, StopCause::Done, "{plan:?}");
-    assert!(plan.iter().any(|a| a == "[CUT] <bread> (14)"), "{plan:?}");
-    assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(24) }), "{plan:?}");
+    done_with_tool_taken_first("cut the bread", "CUT", ("knife", 24), "[CUT] <bread> (14)");
 }
 
 #[test]
 fn what_is_wiped_is_wiped_with_a_cloth_taken_first() {
     // "Wipe the kitchen counter" names no cloth; the executor's WIPE needs one held, and names
     // the demo's rag (SmolLM2 turned to the counter and stopped).
-    let mut m = Scripted::new(&["action: [GRAB] <rag> (26)", "action: [WIPE] <kitchencounter> (11)"]);
-    m.preferences = ["subgoal: WIPE", "done"].iter().map(|s| s.to_string()).collect();
-    let (out, w) = infer_on_demo(&mut m, "wipe the kitchen counter");
-    let plan = plan_lines(&out);
-    assert_eq!(out.stop, StopCause::Done, "{plan:?}");
-    assert!(plan.iter().any(|a| a == "[WIPE] <kitchencounter> (11)"), "{plan:?}");
-    assert!(w.holds(&Fact::Holds { from: w.character(), to: Some(26) }), "{plan:?}");
+    done_with_tool_taken_first("wipe the kitchen counter", "WIPE", ("rag", 26), "[WIPE] <kitchencounter> (11)");
 }
 
 #[test]
