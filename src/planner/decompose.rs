@@ -138,10 +138,15 @@ impl Run<'_> {
                 .filter(|l| !(self.cfg.skip_held_lines && holds(l)))
                 .cloned()
                 .collect();
-            // (nor an appliance's ON line while a line offered puts a thing in it: see
-            // `Goals::waits_for_a_thing_put_in`)
+            // (nor an appliance's ON line while a line offered puts a thing in it, nor the robot's
+            // way to where a thing is carried before it is taken: see
+            // `Goals::waits_for_a_thing_put_in`, `Goals::waits_for_a_thing_carried`)
             match self.env.world() {
-                Some(w) => open.iter().filter(|l| !self.goals.waits_for_a_thing_put_in(l, w, &open)).cloned().collect(),
+                Some(w) => open
+                    .iter()
+                    .filter(|l| !self.goals.waits_for_a_thing_put_in(l, w, &open) && !self.goals.waits_for_a_thing_carried(l, w, &open))
+                    .cloned()
+                    .collect(),
                 None => open,
             }
         } else {

@@ -176,6 +176,31 @@ impl Goals {
             })
     }
 
+    /// Whether `line` takes the robot to a place the words say to carry a thing to ("bring the
+    /// milk to the living room": the robot in the room, or close to the sink for "take the mug
+    /// to the sink") while a line of `menu` has it take the thing it has not taken yet: the thing
+    /// is carried there, so it is taken first. (SmolLM2 walked to the living room, then back to
+    /// the milk, and the plan ended in the kitchen.) The line is offered once the thing is held,
+    /// or its line was taken.
+    pub fn waits_for_a_thing_carried(&self, line: &str, w: &World, menu: &[String]) -> bool {
+        let Some(Meaning::Fact(Fact::Edge { from, relation: Relation::Inside | Relation::Close, to })) = self.meaning(line) else {
+            return false;
+        };
+        let robot = *from;
+        let held = |thing: u32| [Relation::HoldsRh, Relation::HoldsLh].into_iter().any(|relation| w.holds(&Fact::Edge { from: robot, relation, to: thing }));
+        let takes = |l: &String, thing: u32| {
+            matches!(self.meaning(l), Some(Meaning::Fact(Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. })) if *to == thing)
+        };
+        Some(robot) == self.robot
+            && self.wording.carried.iter().any(|&(thing, place)| place == *to && !held(thing) && menu.iter().any(|l| takes(l, thing)))
+    }
+
+    /// Whether what an inferred `line` asks holds at the start and is to stay so: not where the
+    /// robot is now and is to carry a thing to (it leaves to take the thing).
+    pub fn holds_at_start(&self, line: &str, w: &World) -> bool {
+        matches!(self.meaning(line), Some(Meaning::Fact(f)) if w.holds(f)) && !self.waits_for_a_thing_carried(line, w, &self.lines)
+    }
+
     /// Whether the inferred lines `taken` so far only put the robot in a room or close to things
     /// while `menu` still offers a line about something else: walking into a room is on the way
     /// to what the words name there ("go to the toilet": into the bathroom first), not all of it,
@@ -282,7 +307,10 @@ pub const MAX_GOAL_OBJECTS: usize = 40;
 /// offered, nor, where the `instruction` does not name the verb that sets it, an appliance OFF
 /// or PLUGGED_OUT or an object CLEAN (any washing verb), nor an object INSIDE something that is
 /// not a container, or ON something that is neither a surface nor a container, nor a relation
-/// that holds in `w` (the world at the start: where a thing was taken from is no goal).
+/// that holds in `w` (the world at the start: where a thing was taken from is no goal), but for
+/// what the words ask that holds already (its line is theirs, and the user is told) and where
+/// the robot is to carry a thing to. Where everything the words ask holds already, their lines
+/// are all the lines: the root has nothing to do.
 ///
 /// Returns the lines with what each asks for, and what the words say among them as groups of
 /// lines ([`Wording::keep_said`]; none without `wording`).
@@ -304,8 +332,16 @@ pub fn candidates(
     let about_named = |ids: &[u32]| named.is_empty() || ids.iter().all(|id| *id == robot || named.contains(id));
     let mut out: Vec<(String, Meaning)> = Vec::new();
     let mut push = |line: String, m: Meaning| add_line(w, &mut out, line, m);
+    // (a room the words say to carry a thing to is a thing said of WALK's: its line is a group.
+    // Not a room they say to walk into: "I walk into the bathroom and …" says where the rest is
+    // done, not all of it.)
+    let mut room_lines: Vec<(String, Verb)> = Vec::new();
+    let carried_to = |id: u32| wording.is_some_and(|words| words.carried.iter().any(|&(_, p)| p == id));
     for &room in named.iter().filter(|&&id| w.node(id).is_some_and(|n| n.is_room())) {
         let f = Fact::Edge { from: robot, relation: Relation::Inside, to: room };
+        if carried_to(room) {
+            room_lines.push((w.describe(&f), Verb::Walk));
+        }
         push(w.describe(&f), Meaning::Fact(f));
     }
     for &id in objects.iter().filter(|&&id| about_named(&[id])) {
@@ -327,7 +363,7 @@ pub fn candidates(
     // Lines about the robot alone (its posture), with the verbs that bring them about.
     let mut robot_lines: Vec<(String, Verb)> = Vec::new();
     // Every fact line an action brings about, with its verb.
-    let mut made_by: Vec<(String, Verb)> = Vec::new();
+    let mut made_by: Vec<(String, Verb)> = room_lines;
     for a in typed_actions(w, &objects) {
         if matches!(a.verb, Verb::Walk | Verb::Run | Verb::Find) || excluded.contains(&a.verb) {
             continue;
@@ -446,14 +482,19 @@ pub fn candidates(
         made_by.push((line.clone(), v));
         add_line(w, &mut out, line, Meaning::Fact(f));
     }
-    let said = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
+    let (said, met) = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
     // A relation that holds at the start (a thing's place, what a hand holds, where the robot
     // is) is no goal: its line would be offered once a step had undone it, to put back what was
     // taken for the task (SmolLM2 put the glass it was to drink from back in the cabinet it took
-    // it from). Said by the words, it asks nothing either (`keep_said` reads "put the plate in
-    // the cabinet" of a plate in it as the other placement). A state is a goal: a fridge opened
-    // on the way is closed again.
-    out.retain(|(_, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)));
+    // it from). A state is a goal: a fridge opened on the way is closed again. (But for what the
+    // words ask that holds already and asks nothing else, `met`: the user is told it holds.)
+    // Nor is where the words say to carry a thing, where the robot is now: it leaves to take the
+    // thing ("bring the book to the kitchen" from the kitchen; see `Goals::waits_for_a_thing_carried`).
+    let carried_to = |m: &Meaning| {
+        matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::Inside | Relation::Close, to })
+            if *from == robot && wording.is_some_and(|words| words.carried.iter().any(|(_, p)| p == to)))
+    };
+    out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)) || met.contains(l) || carried_to(m));
     // What the words say keeps the lines left (a group of such a relation alone is none): the
     // root looks for a group's lines among those it is offered, and a reader of the trace's
     // groups finds each line among the candidates.
@@ -463,6 +504,14 @@ pub fn candidates(
         if !group.is_empty() && !kept_said.contains(&group) {
             kept_said.push(group);
         }
+    }
+    // Where all the words ask holds already ("put the remote on the coffee table" of a remote
+    // there, "close the microwave" of a closed one), the lines they do not ask are no goals: the
+    // root has nothing to do, and says so (SmolLM2, offered only the others, turned to the
+    // coffee table).
+    let meets = |l: &String| out.iter().any(|(o, m)| o == l && matches!(m, Meaning::Fact(f) if w.holds(f)));
+    if !kept_said.is_empty() && kept_said.iter().all(|g| g.iter().any(meets)) {
+        out.retain(|(l, _)| kept_said.iter().flatten().any(|s| s == l));
     }
     (out, kept_said)
 }
@@ -510,6 +559,11 @@ pub struct Wording {
     /// A thing used where the robot sits, and the seat ("read the book on the sofa"): the thing
     /// is not put there.
     seated: Vec<(u32, u32)>,
+    /// A thing the words say to put away that is put away already, and where ("put the plate
+    /// away" of a plate in the cabinet): what they ask holds.
+    stored: Vec<(u32, u32)>,
+    /// A thing the words say to carry to a place, and the place ("take the mug to the sink").
+    carried: Vec<(u32, u32)>,
 }
 
 impl Wording {
@@ -643,6 +697,7 @@ impl Wording {
         // A thing carried "to" a place ("take the mug to the sink", "bring the glass to the
         // sink", "take the radio to the chair") is taken there in hand: the place is walked to,
         // as "walk to the sink" says (SmolLM2 turned to the sink, picked up the mug and stopped).
+        let mut carried_to: Vec<(u32, u32)> = Vec::new();
         for pair in found.windows(2) {
             let ((k, i, thing), (j, _, to)) = (&pair[0], &pair[1]);
             let b = articles_before(&words, *k);
@@ -654,6 +709,7 @@ impl Wording {
                     say(&mut said, &mut said_once, thing, &[Verb::Grab]);
                 }
                 say(&mut said, &mut said_once, to, &[Verb::Walk]);
+                carried_to.extend(thing.iter().flat_map(|&x| to.iter().map(move |&p| (x, p))));
             }
         }
         // The relation the words say between each object named and the next ("A in B", "A on B").
@@ -732,7 +788,8 @@ impl Wording {
             relations.extend(pairs.iter().copied());
             relations_once.push(pairs);
         }
-        Wording { said, relations, said_once, relations_once, verb_words, plural, seated }
+        let stored = put_away(w, &words, &found).into_iter().filter_map(|id| stored_in(w, id).map(|c| (id, c))).collect();
+        Wording { said, relations, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to }
     }
 
     /// The verbs said of `id`.
@@ -759,7 +816,10 @@ impl Wording {
     /// its verb, and nothing else asks for it) with the posture they put the robot in ("lie
     /// down": LYING). Of two opposite verbs said of one object ("open the fridge, …, close it"),
     /// only the later is a group: the words end there.
-    fn keep_said(&self, w: &World, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> Vec<Vec<String>> {
+    ///
+    /// Also returns the lines of what the words ask that holds already and asks nothing else
+    /// (each its own group): the candidates keep them, though they hold at the start.
+    fn keep_said(&self, w: &World, made_by: &[(String, Verb)], out: &mut Vec<(String, Meaning)>) -> (Vec<Vec<String>>, Vec<String>) {
         let robot = w.character();
         let verbs_of_line = |line: &str, m: &Meaning| -> Vec<Verb> {
             let mut v: Vec<Verb> = made_by.iter().filter(|(l, _)| l == line).map(|(_, v)| *v).collect();
@@ -807,15 +867,17 @@ impl Wording {
         for &(x, seat) in &self.seated {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to }) if *from == x && *to == seat));
         }
-        // (Where the relation said holds already, the words cannot ask for it: the other
-        // placement is what they can bring about. VirtualHome's houses keep dishes INSIDE the
-        // dishwasher that "put the plates into the dishwasher" is to put ON it, as its own
-        // programs load a dishwasher with PUTBACK.)
+        // (Where the relation said of an appliance holds already, the words cannot ask for it:
+        // the other placement is what they can bring about. VirtualHome's houses keep dishes
+        // INSIDE the dishwasher that "put the plates into the dishwasher" is to put ON it, as its
+        // own programs load a dishwasher with PUTBACK. Of a cupboard or a table it holds: "put
+        // the plate in the cabinet" of a plate in it asks nothing, where SmolLM2 put it on top.)
         let other = |r: Relation| if r == Relation::Inside { Relation::On } else { Relation::Inside };
         let already = |from: u32, relation: Relation, to: u32| w.holds(&Fact::Edge { from, relation, to });
+        let reread = |from: u32, relation: Relation, to: u32| already(from, relation, to) && is_appliance(w, to);
         for &(from, keep, to) in &self.relations {
             let edge = |relation| Meaning::Fact(Fact::Edge { from, relation, to });
-            if out.iter().any(|(_, m)| *m == edge(keep)) && !already(from, keep, to) {
+            if out.iter().any(|(_, m)| *m == edge(keep)) && !reread(from, keep, to) {
                 out.retain(|(_, m)| *m != edge(other(keep)));
             }
         }
@@ -832,14 +894,41 @@ impl Wording {
             let of = |(l, m): &&(String, Meaning)| once.iter().any(|&(x, v)| alone_on(m, x) && verbs_of_line(l, m).contains(&v));
             add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
         }
-        for once in &self.relations_once {
+        // What the words ask that holds already and asks nothing else (the other placement not
+        // offered: "put the remote on the coffee table" of a remote there; a thing put away
+        // already) is met: its line is a group, kept among the candidates, so the root can take it
+        // and the user is told it holds. (Without it, the words said nothing the root could take,
+        // and SmolLM2 turned to the coffee table.)
+        let mut met: Vec<String> = Vec::new();
+        let stored: Vec<Vec<(u32, Relation, u32)>> = self.stored.iter().map(|&(x, c)| vec![(x, Relation::Inside, c)]).collect();
+        for once in self.relations_once.iter().chain(&stored) {
             let said = |m: &Meaning| {
                 once.iter().any(|&(from, relation, to)| {
-                    let r = if already(from, relation, to) { other(relation) } else { relation };
+                    let r = if reread(from, relation, to) { other(relation) } else { relation };
                     *m == Meaning::Fact(Fact::Edge { from, relation: r, to })
                 })
             };
-            add(out.iter().filter(|(_, m)| said(m)).map(|(l, _)| l.clone()).collect());
+            let lines: Vec<String> = out.iter().filter(|(_, m)| said(m)).map(|(l, _)| l.clone()).collect();
+            if !lines.is_empty() {
+                add(lines);
+                continue;
+            }
+            // (a thing "in the kitchen" is where it is, not where to put it: no line of its own; nor
+            // is a thing the words say a verb of, "pick up the phone on the desk", where it goes)
+            let holding: Vec<Fact> = once
+                .iter()
+                .filter(|&&(from, _, to)| !w.node(to).is_some_and(|n| n.is_room()) && self.verbs_of(from).is_empty())
+                .map(|&(from, relation, to)| Fact::Edge { from, relation, to })
+                .filter(|f| w.holds(f))
+                .collect();
+            let lines: Vec<String> = holding.iter().map(|f| w.describe(f)).collect();
+            for (f, line) in holding.into_iter().zip(&lines) {
+                if !out.iter().any(|(l, _)| l == line) {
+                    out.push((line.clone(), Meaning::Fact(f)));
+                }
+            }
+            met.extend(lines.iter().cloned());
+            add(lines);
         }
         // A verb word's action line, or the posture its verb puts the robot in ("lie down":
         // LYING; sitting on the bed would meet "character is ON to bed" alone).
@@ -854,7 +943,7 @@ impl Wording {
             let of = |(l, m): &&(String, Meaning)| matches!(m, Meaning::Verb(v) if verbs.contains(v)) || posture(l, m, &verbs);
             add(out.iter().filter(of).map(|(l, _)| l.clone()).collect());
         }
-        groups
+        (groups, met)
     }
 }
 
@@ -984,6 +1073,10 @@ const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["bring", "me"], &[Verb::Grab]),
     (&["bring"], &[Verb::Grab]),
     (&["brought"], &[Verb::Grab]),
+    // What is handed to the user is held out to them ("hand me the book": SmolLM2 opened it).
+    (&["hand", "me"], &[Verb::Grab]),
+    (&["give", "me"], &[Verb::Grab]),
+    (&["pass", "me"], &[Verb::Grab]),
     (&["fetch"], &[Verb::Grab]),
     (&["carry"], &[Verb::Grab]),
     (&["carri"], &[Verb::Grab]),
@@ -1178,11 +1271,20 @@ fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
 /// plate away", "store the milk"): each thing with the place it is kept in ([`store_for`]). A
 /// place said after "away" ("put the plate away in the cabinet") is the words' own relation.
 fn implied_stores(w: &World, focus: &[u32], words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<(u32, u32)> {
-    put_away(w, words, found).into_iter().filter_map(|id| store_for(w, focus, id).map(|place| (id, place))).collect()
+    put_away(w, words, found)
+        .into_iter()
+        .filter(|&id| stored_in(w, id).is_none())
+        .filter_map(|id| store_for(w, focus, id).map(|place| (id, place)))
+        .collect()
+}
+
+/// Where `thing` is put away already: inside something that opens (the plate in the cabinet).
+fn stored_in(w: &World, thing: u32) -> Option<u32> {
+    w.related(thing, Relation::Inside).into_iter().find(|&c| w.node(c).is_some_and(|n| n.properties.contains(Property::CanOpen)))
 }
 
 /// The things the words say to put away and not where ([`implied_stores`]), where they are not
-/// put away already.
+/// put away already ([`stored_in`]: those the words ask nothing of).
 fn put_away(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<u32> {
     let is = |i: usize, forms: &[&str]| words.get(i).is_some_and(|x| forms.contains(&x.as_str()));
     let place_word = |i: usize| is(i, INTO) || is(i, ONTO);
@@ -1199,12 +1301,10 @@ fn put_away(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> 
             }
         }
     }
-    // (a thing inside something that opens is put away already: the plate in the cabinet)
-    let stored = |id: u32| w.related(id, Relation::Inside).iter().any(|&c| w.node(c).is_some_and(|n| n.properties.contains(Property::CanOpen)));
     let mut out = Vec::new();
     for (from, to) in spans {
         for (_, _, ids) in found.iter().filter(|(j, end, _)| *j >= from && *end <= to) {
-            for &id in ids.iter().filter(|&&id| can_be_held(w, id) && !stored(id)) {
+            for &id in ids.iter().filter(|&&id| can_be_held(w, id)) {
                 if !out.contains(&id) {
                     out.push(id);
                 }
@@ -1291,7 +1391,10 @@ pub fn missing_tools(w: &World, focus: &[u32], text: &str) -> Vec<String> {
         );
     }
     let homeless: Vec<&str> =
-        put_away(w, &words, &found).into_iter().filter(|&id| store_for(w, focus, id).is_none()).filter_map(|id| w.node(id).map(|n| n.class_name)).collect();
+        put_away(w, &words, &found)
+            .into_iter()
+            .filter(|&id| stored_in(w, id).is_none() && store_for(w, focus, id).is_none())
+            .filter_map(|id| w.node(id).map(|n| n.class_name)).collect();
     if !homeless.is_empty() {
         out.push(format!(
             "the instruction says to put away {} and not where, and the scene has nowhere to keep {it} (a fridge or freezer \
@@ -1650,6 +1753,7 @@ mod tests {
         assert!(!named_in(&w, "eat the bread").contains(&24));
         // What is brought is held.
         assert_eq!(Wording::of(&w, &all, "bring me the remote").said, [(32, Verb::Grab)]);
+        assert_eq!(Wording::of(&w, &all, "hand me the remote").said, [(32, Verb::Grab)]);
     }
 
     #[test]
@@ -1893,13 +1997,35 @@ mod tests {
         assert!(has(&on, "bread is ON to sink") && !has(&on, "bread is INSIDE to sink"), "{on:?}");
         assert!(on.iter().any(|l| l.starts_with("character is HOLDS")), "{on:?}");
         assert!(has(&lines(&[14, 20], "put the bread on the sink", false), "bread is INSIDE to sink"));
-        // The plate (17) is INSIDE the kitchen cabinet (16) already: "put the plate in the
-        // cabinet" cannot ask for that, so the other placement stays, and is the thing said.
-        let kept = lines(&[16, 17], "put the plate in the kitchen cabinet", true);
-        assert!(has(&kept, "plate is ON to kitchencabinet"), "{kept:?}");
-        let words = Wording::of(&w, &[16, 17], "put the plate in the kitchen cabinet");
-        let said = candidates(&w, &[16, 17], &[], Some("put the plate in the kitchen cabinet"), &[16, 17], Some(&words)).1;
-        assert!(said.contains(&vec!["plate is ON to kitchencabinet".to_string()]), "{said:?}");
+        // The plate (17) is INSIDE the kitchen cabinet (16) already: what "put the plate in the
+        // cabinet" asks holds, and is all the lines (so the root has nothing to do).
+        let said_of = |w: &World, focus: &[u32], t: &str| {
+            let words = Wording::of(w, focus, t);
+            let (lines, said) = candidates(w, focus, &[], Some(t), focus, Some(&words));
+            (lines.into_iter().map(|(l, _)| l).collect::<Vec<_>>(), said)
+        };
+        let met = vec!["plate is INSIDE to kitchencabinet".to_string()];
+        assert_eq!(said_of(&w, &[16, 17], "put the plate in the kitchen cabinet"), (met.clone(), vec![met.clone()]));
+        // So is a thing put away already ("put the plate away"): where it is kept is what is said.
+        assert_eq!(said_of(&w, &[16, 17], "put the plate away"), (met.clone(), vec![met]));
+        // Of an appliance, VirtualHome's dishes INSIDE the dishwasher that "put the plates into
+        // the dishwasher" puts ON it: the other placement is the thing said. (The plate, 17, in
+        // the microwave, 15.)
+        let in_microwave = World::demo_edited(|g| {
+            for e in g["edges"].as_array_mut().unwrap() {
+                if e["from_id"] == 17 && e["relation_type"] == "INSIDE" && e["to_id"] == 16 {
+                    e["to_id"] = serde_json::json!(15);
+                }
+            }
+        });
+        let (offered, said) = said_of(&in_microwave, &[15, 17], "put the plate in the microwave");
+        assert_eq!(said, [["plate is ON to microwave"]], "{offered:?}");
+        assert!(offered.len() > 1, "not all it asks holds, so the other lines stay: {offered:?}");
+        // Where the other lines are all the words ask for besides what holds, they stay: the
+        // apple (12) on the counter (11), and the fridge (10) to open.
+        let (offered, said) = said_of(&w, &[10, 11, 12], "put the apple on the kitchen counter and open the fridge");
+        assert!(said.contains(&vec!["apple is ON to kitchencounter".to_string()]) && said.contains(&vec!["fridge is OPEN".to_string()]), "{said:?}");
+        assert!(offered.len() > 2, "{offered:?}");
         // Where it does not hold yet, the relation said is the only one.
         let apple = lines(&[12, 16], "put the apple in the kitchen cabinet", true);
         assert!(has(&apple, "apple is INSIDE to kitchencabinet") && !has(&apple, "apple is ON to kitchencabinet"), "{apple:?}");

@@ -19,7 +19,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use super::decompose::{with_holders, Proposed};
-use super::goals::{self, Goals, Meaning, Wording};
+use super::goals::{self, Goals, Wording};
 use super::env::{Env, Outcome};
 use super::prompt::{NodeView, Prompter, StateLog};
 use super::rules::new_facts;
@@ -270,7 +270,7 @@ impl Run<'_> {
         // (and which of those hold already: a user asking for what is so is told, not shown an
         // empty plan alone)
         let holding: Vec<&String> =
-            self.goals.said.iter().flatten().filter(|l| matches!(self.goals.meaning(l), Some(Meaning::Fact(f)) if w.holds(f))).collect();
+            self.goals.said.iter().flatten().filter(|l| self.goals.holds_at_start(l, w)).collect();
         self.trace.event("goal_candidates", json!({"lines": self.goals.lines, "said": self.goals.said, "holding": holding}));
     }
 
