@@ -486,15 +486,15 @@ pub fn candidates(
     // A relation that holds at the start (a thing's place, what a hand holds, where the robot
     // is) is no goal: its line would be offered once a step had undone it, to put back what was
     // taken for the task (SmolLM2 put the glass it was to drink from back in the cabinet it took
-    // it from). A state is a goal: a fridge opened on the way is closed again. (But for what the
-    // words ask that holds already and asks nothing else, `met`: the user is told it holds.)
-    // Nor is where the words say to carry a thing, where the robot is now: it leaves to take the
-    // thing ("bring the book to the kitchen" from the kitchen; see `Goals::waits_for_a_thing_carried`).
-    let carried_to = |m: &Meaning| {
-        matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::Inside | Relation::Close, to })
-            if *from == robot && wording.is_some_and(|words| words.carried.iter().any(|(_, p)| p == to)))
+    // it from). A state is a goal: a fridge opened on the way is closed again. Two relations stay:
+    // what the words ask that holds already and asks nothing else (`met`: the user is told it
+    // holds), and the robot at a place the words say to carry a thing to, where it is now (it
+    // leaves to take the thing: "bring the book to the kitchen" from the kitchen; see
+    // `Goals::waits_for_a_thing_carried`).
+    let robot_there = |m: &Meaning| {
+        matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::Inside | Relation::Close, to }) if *from == robot && carried_to(*to))
     };
-    out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)) || met.contains(l) || carried_to(m));
+    out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::Edge { .. }) if w.holds(f)) || met.contains(l) || robot_there(m));
     // What the words say keeps the lines left (a group of such a relation alone is none): the
     // root looks for a group's lines among those it is offered, and a reader of the trace's
     // groups finds each line among the candidates.
@@ -1283,8 +1283,8 @@ fn stored_in(w: &World, thing: u32) -> Option<u32> {
     w.related(thing, Relation::Inside).into_iter().find(|&c| w.node(c).is_some_and(|n| n.properties.contains(Property::CanOpen)))
 }
 
-/// The things the words say to put away and not where ([`implied_stores`]), where they are not
-/// put away already ([`stored_in`]: those the words ask nothing of).
+/// The things the words say to put away and not where ([`implied_stores`]), put away already
+/// ([`stored_in`]) or not.
 fn put_away(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Vec<u32> {
     let is = |i: usize, forms: &[&str]| words.get(i).is_some_and(|x| forms.contains(&x.as_str()));
     let place_word = |i: usize| is(i, INTO) || is(i, ONTO);
