@@ -419,8 +419,10 @@ pub fn candidates(
     }
     // Where the instruction names the verb of one of the robot's postures ("sit on the bench"),
     // the others are not its goals: SmolLM2 lay down on the bench it was asked to sit on.
+    // (or where the words say it otherwise: a thing used on a seat is used sitting, `Wording`)
     if let Some(t) = instruction {
-        let said: Vec<&String> = robot_lines.iter().filter(|(_, v)| names_verb(t, *v)).map(|(l, _)| l).collect();
+        let worded = |v: Verb| wording.is_some_and(|words| words.verb_words.iter().flatten().any(|&x| x == v));
+        let said: Vec<&String> = robot_lines.iter().filter(|(_, v)| names_verb(t, *v) || worded(*v)).map(|(l, _)| l).collect();
         if !said.is_empty() {
             out.retain(|(l, _)| said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
         }
@@ -464,7 +466,10 @@ pub fn candidates(
     if let Some(t) = instruction {
         let washing = WASHING.iter().any(|&v| names_verb(t, v));
         let unsaid = |s: &State| match s {
-            State::Off | State::PluggedOut => !state_verb(*s).is_some_and(|v| names_verb(t, v)),
+            // (said of a thing with the particle after it too: "turn the light off")
+            State::Off | State::PluggedOut => {
+                !state_verb(*s).is_some_and(|v| names_verb(t, v) || wording.is_some_and(|words| words.said.iter().any(|&(_, x)| x == v)))
+            }
             State::Clean => !washing,
             _ => false,
         };
@@ -589,7 +594,13 @@ impl Wording {
             // the sink and wash it" is the mug (SmolLM2 washed the sink), "put the box in the
             // oven, close it" the oven, "take the book from the shelf and read it" the book.
             let verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
-            let affords = |ids: &[u32]| ids.iter().any(|&id| verbs.iter().any(|&v| v.arity() == 1 && slot_admits(w, v, 0, id)));
+            // (after a word for putting, which names no verb of the embodiment: a thing a hand
+            // can hold; "take the apple from the counter and put it on the plate" is the apple,
+            // where SmolLM2 was asked to put the counter on the plate)
+            let putting = k > 0 && PUTTING.contains(&words[k - 1].as_str());
+            let affords = |ids: &[u32]| {
+                ids.iter().any(|&id| (putting && can_be_held(w, id)) || verbs.iter().any(|&v| v.arity() == 1 && slot_admits(w, v, 0, id)))
+            };
             let works_a_place =
                 verbs.iter().any(|v| matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut));
             // (after "in" or "on", an article and one more word aside: "on the dinner table")
@@ -780,6 +791,9 @@ impl Wording {
         relations.retain(|&(from, _, to)| !(used_in_place(from) && seat(to)));
         if !seats.is_empty() {
             say(&mut said, &mut said_once, &seats, &[Verb::Sit]);
+            // (and SIT as a word of the text would: the robot sits, it does not lie there, as
+            // SmolLM2 did on the sofa for "drink the milk on the sofa")
+            verb_words.push(vec![Verb::Sit]);
         }
         if let Some((thing, heater)) = implied {
             let holds_inside = heater.iter().all(|&id| w.node(id).is_some_and(|n| n.properties.contains(Property::Containers)));
@@ -1132,6 +1146,10 @@ const HEATING: &[(&str, &[&str])] = &[
     ("bake", &["oven", "stove"]),
     ("toast", &["toaster", "oven", "microwave"]),
 ];
+
+/// Words for putting a thing somewhere, none of them a verb of the embodiment's ("put it in the
+/// fridge", "place it on the table").
+const PUTTING: &[&str] = &["put", "puts", "putting", "place", "places", "placing", "placed", "set", "sets", "setting", "lay", "lays", "laid"];
 
 /// Words for carrying a thing somewhere ("take the mug to the sink").
 const CARRYING: &[&str] =
@@ -1773,7 +1791,16 @@ mod tests {
             let on_seat = format!("character is ON to {seat}");
             assert!(said.iter().any(|g| g.contains(&on_seat)), "{t}: {said:?}");
             assert!(!c.iter().any(|l| *l == format!("book is ON to {seat}")), "{t}: {c:?}");
+            // sitting, not lying there (SmolLM2 lay on the sofa to drink the milk)
+            assert!(said.contains(&vec!["character is SITTING".to_string()]) && !c.iter().any(|l| l == "character is LYING"), "{t}: {c:?}");
         }
+        // A switch turned off with its particle after the thing is said so: "turn the light off"
+        // offers the OFF line of the light that is on (23).
+        let (c, said) = lines("turn the light off in the kitchen");
+        assert!(said.contains(&vec!["light is OFF".to_string()]), "{c:?} {said:?}");
+        // "Put it" is a thing a hand can hold: the apple (12) on the plate (17), not the counter.
+        let it = Wording::of(&w, &all, "take the apple from the kitchen counter and put it on the plate");
+        assert_eq!(it.relations, [(12, Relation::On, 17)], "{it:?}");
         // Put there, it is put there; read where it is, nothing of the seat is said.
         let (c, said) = lines("put the book on the sofa");
         assert!(c.iter().any(|l| l == "book is ON to sofa") && !said.iter().flatten().any(|l| l.starts_with("character is ON")), "{said:?}");
