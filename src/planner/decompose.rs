@@ -16,11 +16,11 @@ use super::prompt::NodeView;
 use super::rules::{changes_its_objects, changes_nothing, fresh_steps, gained, makes_false, recent, takes_a_reserved_hand, trial};
 use super::tree::NodeId;
 use super::{ActionChoice, CallRecord, StopCause};
-use crate::action::{Action, Verb};
+use crate::action::{Action, ObjRef, Verb};
 use crate::grammar::{ActionSet, DecomposeGrammar, Proposal, Strength};
 use crate::llm::engine::{Prompt, Score};
 use crate::scene_grammar::typed_actions;
-use crate::world::vocab::Relation;
+use crate::world::vocab::{Property, Relation};
 use crate::world::{Fact, World};
 
 /// What a decision at a node may write: the decomposition grammar, the targets among its actions
@@ -423,8 +423,14 @@ impl Run<'_> {
                 let alone = matches!(f, Fact::State { id, .. } if *id == w.character());
                 let making = if alone { narrowed(making, on_named) } else { making };
                 // A liquid no hand can hold by itself (water) is poured, where pouring makes the
-                // line true, not put: VirtualHome's programs never put water anywhere.
-                let poured = |a: &&Action| a.verb == Verb::Pour && a.args.first().is_some_and(|o| !goals::can_be_held(w, o.id));
+                // line true, not put: VirtualHome's programs never put water anywhere. So is a
+                // drink into a cup ("fill the mug with milk": SmolLM2 put the milk carton in it),
+                // but not a cup itself (the mug is put in the sink, not poured).
+                let recipient = |o: &ObjRef| w.node(o.id).is_some_and(|n| n.properties.contains(Property::Recipient));
+                let poured = |a: &&Action| {
+                    let (Some(what), Some(into)) = (a.args.first(), a.args.get(1)) else { return false };
+                    a.verb == Verb::Pour && (!goals::can_be_held(w, what.id) || (recipient(into) && !recipient(what)))
+                };
                 let making = narrowed(making, poured);
                 // And by a verb the instruction says of the object ("sit on the sofa": SIT, not
                 // LIE, for "character is ON to sofa").

@@ -187,7 +187,7 @@ impl Goals {
             return false;
         };
         let robot = *from;
-        let held = |thing: u32| [Relation::HoldsRh, Relation::HoldsLh].into_iter().any(|relation| w.holds(&Fact::Edge { from: robot, relation, to: thing }));
+        let held = |thing: u32| w.holds(&Fact::Holds { from: robot, to: Some(thing) });
         let takes = |l: &String, thing: u32| {
             matches!(self.meaning(l), Some(Meaning::Fact(Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. })) if *to == thing)
         };
@@ -569,6 +569,10 @@ pub struct Wording {
     stored: Vec<(u32, u32)>,
     /// A thing the words say to carry to a place, and the place ("take the mug to the sink").
     carried: Vec<(u32, u32)>,
+    /// Things named only as where things are taken from, each time after "from" or "out of", that
+    /// the words say no verb of ("take the milk out of the fridge"). ("In" and "on" say no such
+    /// thing: "work on the computer", "load the clothes into the washing machine".)
+    places: Vec<u32>,
 }
 
 impl Wording {
@@ -728,7 +732,7 @@ impl Wording {
             let between = &words[*i..*j];
             let says = |preps: &[&str]| {
                 between.iter().any(|x| preps.contains(&x.as_str()))
-                    && only(between, &|x| DETERMINERS.contains(&x) || preps.contains(&x) || x == "top" || x == "of")
+                    && only(between, &|x| DETERMINERS.contains(&x) || preps.contains(&x) || BETWEEN_PLACE.contains(&x))
             };
             if says(INTO) {
                 Some(Relation::Inside)
@@ -754,6 +758,19 @@ impl Wording {
             for f in froms.into_iter().rev() {
                 let (a, b) = (&found[f].2, &found[p + 1].2);
                 let pairs: Vec<(u32, Relation, u32)> = a.iter().flat_map(|&from| b.iter().map(move |&to| (from, relation, to))).collect();
+                relations.extend(pairs.iter().copied());
+                relations_once.push(pairs);
+            }
+        }
+        // "Fill A with B": B in A ("fill the mug with milk": the milk poured in; SmolLM2 opened the
+        // milk and stopped).
+        for pair in found.windows(2) {
+            let ((k, i, vessel), (j, _, what)) = (&pair[0], &pair[1]);
+            let b = articles_before(&words, *k);
+            let filled = b > 0 && FILLING.contains(&words[b - 1].as_str());
+            let between = &words[*i..*j];
+            if filled && between.first().is_some_and(|x| x == "with") && only(&between[1..], &|x| DETERMINERS.contains(&x)) {
+                let pairs: Vec<(u32, Relation, u32)> = what.iter().flat_map(|&from| vessel.iter().map(move |&to| (from, Relation::Inside, to))).collect();
                 relations.extend(pairs.iter().copied());
                 relations_once.push(pairs);
             }
@@ -803,7 +820,18 @@ impl Wording {
             relations_once.push(pairs);
         }
         let stored = put_away(w, &words, &found).into_iter().filter_map(|id| stored_in(w, id).map(|c| (id, c))).collect();
-        Wording { said, relations, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to }
+        let after_a_place_word = |j: usize| {
+            let i = articles_before(&words, j);
+            let word = |d: usize| if i >= d { words[i - d].as_str() } else { "" };
+            word(1) == "from" || (word(1) == "of" && word(2) == "out")
+        };
+        let mut places: Vec<u32> = found.iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
+        places.sort_unstable();
+        places.dedup();
+        places.retain(|&id| {
+            !said.iter().any(|(x, _)| *x == id) && found.iter().filter(|(_, _, ids)| ids.contains(&id)).all(|(j, _, _)| after_a_place_word(*j))
+        });
+        Wording { said, relations, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, places }
     }
 
     /// The verbs said of `id`.
@@ -864,8 +892,10 @@ impl Wording {
         // What the words say to take ("take a book from the shelf and read it") stays in hand
         // unless they say where it goes: SmolLM2 put the book it had read down on the sofa. What
         // they say to sit or lie on stays where it is: SmolLM2 put the chair it was to sit on
-        // onto the CD player it was to pick up.
-        let keeps_its_place = |v: &Verb| matches!(v, Verb::Grab | Verb::Sit | Verb::Lie);
+        // onto the CD player it was to pick up. Nor is what they say to use where the robot is
+        // (read, eat, drink, watch) put anywhere: SmolLM2 read the book, then put it on the sofa
+        // it was to sit on.
+        let keeps_its_place = |v: &Verb| matches!(v, Verb::Grab | Verb::Sit | Verb::Lie) || USED_IN_PLACE.contains(v);
         for (x, _) in self.said.iter().filter(|(x, v)| keeps_its_place(v) && !self.relations.iter().any(|(from, _, _)| from == x)) {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
         }
@@ -877,6 +907,9 @@ impl Wording {
             let verbs = self.verbs_of(x);
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
         }
+        // A thing named only as where things are taken from is not switched on: nothing the
+        // words say asks it (SmolLM2 switched on the fridge it was to take the milk out of).
+        out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state: State::On }) if self.places.contains(id)));
         // A thing used on a seat is not put on it (SmolLM2 put the book it read on the chair).
         for &(x, seat) in &self.seated {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to }) if *from == x && *to == seat));
@@ -1150,6 +1183,13 @@ const HEATING: &[(&str, &[&str])] = &[
 /// Words for putting a thing somewhere, none of them a verb of the embodiment's ("put it in the
 /// fridge", "place it on the table").
 const PUTTING: &[&str] = &["put", "puts", "putting", "place", "places", "placing", "placed", "set", "sets", "setting", "lay", "lays", "laid"];
+
+/// Words for filling a thing with another ("fill the mug with milk").
+const FILLING: &[&str] = &["fill", "fills", "filling", "filled", "refill", "refills"];
+
+/// Words that may stand between a thing and where it goes besides articles and "in" or "on" ("put
+/// the milk back in the fridge", "on top of the table", "put the book down on the sofa").
+const BETWEEN_PLACE: &[&str] = &["top", "of", "back", "down", "away"];
 
 /// Words for carrying a thing somewhere ("take the mug to the sink").
 const CARRYING: &[&str] =
@@ -1971,6 +2011,13 @@ mod tests {
         assert_eq!(of("put the bread on the plate").relations, [(14, Relation::On, 17)]);
         assert_eq!(of("put the apple into my fridge").relations, [(12, Relation::Inside, 10)]);
         assert_eq!(of("put the book on top of the coffee table").relations, [(34, Relation::On, 33)]);
+        // A word of where it goes between the two ("back", "down", "away").
+        assert_eq!(of("put the milk back in the fridge").relations, [(13, Relation::Inside, 10)]);
+        assert_eq!(of("put the book down on the sofa").relations, [(34, Relation::On, 30)]);
+        assert!(of("put the milk near the fridge").relations.is_empty());
+        // "Fill A with B" puts B in A.
+        assert_eq!(of("fill the mug with milk").relations, [(13, Relation::Inside, 25)]);
+        assert!(of("wipe the mug with the rag").relations.is_empty());
         // A name of two words is one mention.
         assert_eq!(of("put the remote control on the coffee table").relations, [(32, Relation::On, 33)]);
         // Objects joined by "and" before a relation are each in it, not past an earlier one's place.
@@ -2069,6 +2116,21 @@ mod tests {
         // A verb that brings about nothing of its object leaves the object's lines alone: WATCH
         // changes nothing the world records, so the television's switch stays a goal to set.
         assert!(has(&lines(&[31], "watch the television", true), "television is ON"));
+        // A thing named only as where another is taken from (the fridge, 10, the milk, 13, is
+        // in) is not switched on; named otherwise too, or read without the words, it may be.
+        for t in ["take the milk out of the fridge", "take the milk from the fridge"] {
+            let out = lines(&[10, 13], t, true);
+            assert!(!has(&out, "fridge is ON") && has(&out, "fridge is CLOSED"), "{t}: {out:?}");
+        }
+        assert!(has(&lines(&[10, 13], "take the milk out of the fridge", false), "fridge is ON"));
+        assert!(has(&lines(&[10, 13], "take the milk out of the fridge and switch it on", true), "fridge is ON"));
+        assert!(has(&lines(&[10, 13], "the fridge: take the milk out of the fridge", true), "fridge is ON"));
+        assert!(has(&lines(&[10, 13], "put the milk in the fridge", true), "fridge is ON"));
+        // Nor is a thing the words say to use where the robot is put anywhere: the book (34)
+        // read, on the sofa (30) the robot sits on.
+        let read = lines(&[34, 30], "sit on the sofa and read the book", true);
+        assert!(!read.iter().any(|l| l.starts_with("book is ON") || l.starts_with("book is INSIDE")), "{read:?}");
+        assert!(has(&lines(&[34, 30], "sit on the sofa and read the book", false), "book is ON to sofa"));
     }
 
     #[test]

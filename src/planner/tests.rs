@@ -1737,6 +1737,20 @@ fn what_is_handed_over_is_held() {
 }
 
 #[test]
+fn a_drink_is_poured_into_a_cup_not_put_in_it() {
+    // "Fill the mug with milk": the milk in the mug, by POUR; a model that would put the carton
+    // in the mug (SmolLM2 did) is not offered that.
+    let mut m = Scripted::new(&[]);
+    m.preferences = ["subgoal: milk is INSIDE to mug".to_string(), "done".to_string()].into();
+    m.prefer = Some("action: [PUTIN] <milk> (13) <mug> (25)".to_string());
+    let (out, w) = infer_on_demo(&mut m, "fill the mug with milk");
+    let plan = plan_lines(&out);
+    assert_eq!(out.stop, StopCause::Done, "{plan:?}");
+    assert_eq!(plan.last().map(String::as_str), Some("[POUR] <milk> (13) <mug> (25)"), "{plan:?}");
+    assert!(w.holds(&Fact::Edge { from: 13, relation: crate::world::vocab::Relation::Inside, to: 25 }), "{plan:?}");
+}
+
+#[test]
 fn a_hold_line_whose_hand_holds_something_else_puts_that_down_first() {
     // READ took the book in the right hand; "character is HOLDS_RH to apple" then has no step
     // that makes it true (a grab fills the left hand), so the steps that put the book down are
