@@ -712,20 +712,28 @@ impl Wording {
         // A thing carried "to" a place ("take the mug to the sink", "bring the glass to the
         // sink", "take the radio to the chair") is taken there in hand: the place is walked to,
         // as "walk to the sink" says (SmolLM2 turned to the sink, picked up the mug and stopped).
+        // (each pair of things named "VERB the A LINK the B", one of `verbs` before A, articles
+        // aside: "take the mug to the sink", "fill the mug with milk")
+        let phrased = |verbs: &[&str], link: &str| -> Vec<(Vec<u32>, Vec<u32>)> {
+            let pairs = found.windows(2).filter(|pair| {
+                let ((k, i, _), (j, _, _)) = (&pair[0], &pair[1]);
+                let b = articles_before(&words, *k);
+                let between = &words[*i..*j];
+                b > 0
+                    && verbs.contains(&words[b - 1].as_str())
+                    && between.first().is_some_and(|x| x == link)
+                    && only(&between[1..], &|x| DETERMINERS.contains(&x))
+            });
+            pairs.map(|pair| (pair[0].2.clone(), pair[1].2.clone())).collect()
+        };
         let mut carried_to: Vec<(u32, u32)> = Vec::new();
-        for pair in found.windows(2) {
-            let ((k, i, thing), (j, _, to)) = (&pair[0], &pair[1]);
-            let b = articles_before(&words, *k);
-            let carried = b > 0 && CARRYING.contains(&words[b - 1].as_str());
-            let between = &words[*i..*j];
-            if carried && between.first().is_some_and(|x| x == "to") && only(&between[1..], &|x| DETERMINERS.contains(&x)) {
-                // (held on the way: "bring" and "carry" say it as "take" does)
-                if !said_once.iter().any(|once| once.iter().any(|&(id, v)| v == Verb::Grab && thing.contains(&id))) {
-                    say(&mut said, &mut said_once, thing, &[Verb::Grab]);
-                }
-                say(&mut said, &mut said_once, to, &[Verb::Walk]);
-                carried_to.extend(thing.iter().flat_map(|&x| to.iter().map(move |&p| (x, p))));
+        for (thing, to) in phrased(CARRYING, "to") {
+            // (held on the way: "bring" and "carry" say it as "take" does)
+            if !said_once.iter().any(|once| once.iter().any(|&(id, v)| v == Verb::Grab && thing.contains(&id))) {
+                say(&mut said, &mut said_once, &thing, &[Verb::Grab]);
             }
+            say(&mut said, &mut said_once, &to, &[Verb::Walk]);
+            carried_to.extend(thing.iter().flat_map(|&x| to.iter().map(move |&p| (x, p))));
         }
         // The relation the words say between each object named and the next ("A in B", "A on B").
         let relation_between = |(_, i, _): &(usize, usize, Vec<u32>), (j, _, _): &(usize, usize, Vec<u32>)| {
@@ -764,16 +772,10 @@ impl Wording {
         }
         // "Fill A with B": B in A ("fill the mug with milk": the milk poured in; SmolLM2 opened the
         // milk and stopped).
-        for pair in found.windows(2) {
-            let ((k, i, vessel), (j, _, what)) = (&pair[0], &pair[1]);
-            let b = articles_before(&words, *k);
-            let filled = b > 0 && FILLING.contains(&words[b - 1].as_str());
-            let between = &words[*i..*j];
-            if filled && between.first().is_some_and(|x| x == "with") && only(&between[1..], &|x| DETERMINERS.contains(&x)) {
-                let pairs: Vec<(u32, Relation, u32)> = what.iter().flat_map(|&from| vessel.iter().map(move |&to| (from, Relation::Inside, to))).collect();
-                relations.extend(pairs.iter().copied());
-                relations_once.push(pairs);
-            }
+        for (vessel, what) in phrased(FILLING, "with") {
+            let pairs: Vec<(u32, Relation, u32)> = what.iter().flat_map(|&from| vessel.iter().map(move |&to| (from, Relation::Inside, to))).collect();
+            relations.extend(pairs.iter().copied());
+            relations_once.push(pairs);
         }
         // Things put away where the words say not where go where they are kept ("put away the
         // groceries": SmolLM2 turned to the apple and stopped), each its own place.
