@@ -572,7 +572,7 @@ pub struct Wording {
     /// Things named only as where things are taken from, each time after "from" or "out of", that
     /// the words say no verb of ("take the milk out of the fridge"). ("In" and "on" say no such
     /// thing: "work on the computer", "load the clothes into the washing machine".)
-    places: Vec<u32>,
+    taken_from: Vec<u32>,
 }
 
 impl Wording {
@@ -822,18 +822,18 @@ impl Wording {
             relations_once.push(pairs);
         }
         let stored = put_away(w, &words, &found).into_iter().filter_map(|id| stored_in(w, id).map(|c| (id, c))).collect();
-        let after_a_place_word = |j: usize| {
+        let after_from = |j: usize| {
             let i = articles_before(&words, j);
             let word = |d: usize| if i >= d { words[i - d].as_str() } else { "" };
             word(1) == "from" || (word(1) == "of" && word(2) == "out")
         };
-        let mut places: Vec<u32> = found.iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
-        places.sort_unstable();
-        places.dedup();
-        places.retain(|&id| {
-            !said.iter().any(|(x, _)| *x == id) && found.iter().filter(|(_, _, ids)| ids.contains(&id)).all(|(j, _, _)| after_a_place_word(*j))
+        let mut taken_from: Vec<u32> = found.iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
+        taken_from.sort_unstable();
+        taken_from.dedup();
+        taken_from.retain(|&id| {
+            !said.iter().any(|(x, _)| *x == id) && found.iter().filter(|(_, _, ids)| ids.contains(&id)).all(|(j, _, _)| after_from(*j))
         });
-        Wording { said, relations, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, places }
+        Wording { said, relations, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, taken_from }
     }
 
     /// The verbs said of `id`.
@@ -911,7 +911,7 @@ impl Wording {
         }
         // A thing named only as where things are taken from is not switched on: nothing the
         // words say asks it (SmolLM2 switched on the fridge it was to take the milk out of).
-        out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state: State::On }) if self.places.contains(id)));
+        out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state: State::On }) if self.taken_from.contains(id)));
         // A thing used on a seat is not put on it (SmolLM2 put the book it read on the chair).
         for &(x, seat) in &self.seated {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to }) if *from == x && *to == seat));
