@@ -439,8 +439,8 @@ pub enum Proposal {
 }
 
 impl DecomposeGrammar {
-    /// The one line this grammar admits, when it admits exactly one (a single action, no subgoal,
-    /// no `done`): the caller need not ask a model.
+    /// The one line this grammar admits, when it admits exactly one (a single action, one offered
+    /// subgoal, or `done` alone): the caller need not ask a model.
     pub fn only_choice(&self) -> Option<String> {
         match &self.actions {
             ActionSet::Exact(list) if list.len() == 1 && !self.allow_subgoal && !self.allow_done => {
@@ -452,6 +452,7 @@ impl DecomposeGrammar {
             {
                 Some(format!("subgoal: {}", self.subgoal_menu[0]))
             }
+            ActionSet::Exact(list) if list.is_empty() && !self.allow_subgoal && self.allow_done => Some("done".to_string()),
             _ => None,
         }
     }
@@ -732,7 +733,9 @@ mod tests {
         assert_eq!(one(vec![], true, false, &["fridge is OPEN"]).as_deref(), Some("subgoal: fridge is OPEN"));
         assert_eq!(one(vec![], true, false, &["fridge is OPEN", "apple is ON"]), None);
         assert_eq!(one(vec![], true, false, &[]), None, "free text is no single answer");
-        assert_eq!(one(vec![walk], true, false, &["fridge is OPEN"]), None);
+        assert_eq!(one(vec![walk.clone()], true, false, &["fridge is OPEN"]), None);
+        assert_eq!(one(vec![], false, true, &[]).as_deref(), Some("done"), "nothing left but done");
+        assert_eq!(one(vec![walk], false, true, &[]), None);
     }
 
     fn o(c: &str, id: u32) -> ObjRef {

@@ -74,10 +74,19 @@ impl Run<'_> {
         // dropped too; without, at least the action the node has just executed (a greedy tiny
         // model otherwise repeats one step forever).
         let set = self.action_set(node)?;
+        // An instruction whose every verb takes no object ("stand up", "get up from the chair"):
+        // the root's steps are those verbs' alone, and it is done when none can run.
+        let bare = is_root && !self.bare_verbs.is_empty();
+        let set = if bare {
+            let others: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| !self.bare_verbs.contains(v)).collect();
+            set.without(&others)
+        } else {
+            set
+        };
         // The root's subgoals are the request's offered lines (a task's goals in words) not yet
         // taken; once all are taken it proposes actions or `done`.
         let offered = is_root && !self.goals.lines.is_empty();
-        let may_target = target.is_none() && !offered && depth + 1 < max_depth && !st.concrete_only;
+        let may_target = target.is_none() && !offered && depth + 1 < max_depth && !st.concrete_only && !bare;
         let targets = self.target_menu(node, &set, may_target, st)?;
         let actions = match set {
             ActionSet::Exact(list) => {
@@ -168,6 +177,7 @@ impl Run<'_> {
             && target.is_none()
             && !with_targets
             && !self.under_offered(node)
+            && !bare
             && (!offered || !subgoal_menu.is_empty());
         // `done` before any step would end a goal with nothing done; it is offered once a child
         // has been accepted, once every offered subgoal was taken, or when nothing else can be

@@ -27,7 +27,7 @@ use super::terminate::echoes;
 use super::trace::TraceWriter;
 use super::tree::{NodeId, Status, SubgoalTree};
 use super::{CallRecord, PlanOutcome, PlanRequest, PlanStats, PlannerConfig, PlannerKind, StopCause};
-use crate::action::Action;
+use crate::action::{Action, Verb};
 use crate::grammar::{ActionSet, Proposal, Verdict};
 use crate::llm::engine::{Generate, Prompt, StopReason, Warm, WarmSource};
 use crate::llm::LlmError;
@@ -148,6 +148,9 @@ pub(crate) struct Run<'a> {
     /// Those and what holds them, with `subgoal_focus`: the root's focus, listed first in every
     /// observation (empty: the whole focus, in id order).
     pub(super) root_view: Vec<u32>,
+    /// Over a whole scene, where every verb the instruction says takes no object ("stand up",
+    /// "get up from the chair"), those verbs: the root's only steps (see `Run::menu`).
+    pub(super) bare_verbs: Vec<Verb>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -177,9 +180,14 @@ pub(crate) fn run_tree(
             read_as = Some(json!({"named": labels(&root_objects), "holding_them": labels(&root_view[root_objects.len()..])}));
         }
     }
+    // (SmolLM2 walked to a chair and sat for "stand up" said of a robot standing, and took the
+    // chair for "get up from the chair")
+    let said: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| goals::names_verb(&req.instruction, *v)).collect();
+    let bare_verbs = if focus_is_scene && said.iter().all(|v| v.arity() == 0) { said } else { Vec::new() };
     let start_state = env.observe(&root_view, cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
+        bare_verbs,
         root_objects,
         root_view,
         focus_is_scene,
@@ -244,8 +252,22 @@ impl Run<'_> {
         // An instruction that names nothing of a whole scene ("do the chores") would have the
         // model score a line for every state of every object: about a minute of prefill on the
         // demo kitchen, for a choice nothing in the instruction informs. The root proposes steps.
-        if self.focus_is_scene && self.root_objects.is_empty() {
-            self.trace.event("goal_candidates", json!({"lines": [], "why": "the instruction names no object of the scene"}));
+        // (So too where every verb it says takes no object: those verbs are its steps.)
+        if self.focus_is_scene && (self.root_objects.is_empty() || !self.bare_verbs.is_empty()) {
+            let mut why = String::from(match self.root_objects.is_empty() {
+                true => "the instruction names no object of the scene",
+                false => "the instruction says no verb of its objects",
+            });
+            // (a verb it says that takes no object is its steps; one that cannot run now is
+            // told, not left as an empty plan: "stand up" said of a robot standing)
+            for &v in &self.bare_verbs {
+                let Ok(step) = Action::new(v, vec![]) else { continue };
+                match w.why_not(&step) {
+                    Some(f) => why.push_str(&format!("; its words say {step}: {}", f.message)),
+                    None => why.push_str(&format!("; its words say {step}")),
+                }
+            }
+            self.trace.event("goal_candidates", json!({"lines": [], "why": why}));
             return;
         }
         let objects = focus.iter().filter(|&&id| id != w.character()).count();
