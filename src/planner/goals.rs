@@ -421,12 +421,12 @@ pub fn candidates(
     // Where the instruction names the verb of one of the robot's postures ("sit on the bench"),
     // the others are not its goals: SmolLM2 lay down on the bench it was asked to sit on.
     // (or where the words say it otherwise: a thing used on a seat is used sitting, `Wording`)
-    if let Some(t) = instruction {
-        let worded = |v: Verb| wording.is_some_and(|words| words.verb_words.iter().flatten().any(|&x| x == v));
-        let said: Vec<&String> = robot_lines.iter().filter(|(_, v)| names_verb(t, *v) || worded(*v)).map(|(l, _)| l).collect();
-        if !said.is_empty() {
-            out.retain(|(l, _)| said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
-        }
+    let worded = |v: Verb| wording.is_some_and(|words| words.verb_words.iter().flatten().any(|&x| x == v));
+    let postures_said: Vec<&String> = instruction
+        .map(|t| robot_lines.iter().filter(|(_, v)| names_verb(t, *v) || worded(*v)).map(|(l, _)| l).collect())
+        .unwrap_or_default();
+    if !postures_said.is_empty() {
+        out.retain(|(l, _)| postures_said.contains(&l) || !robot_lines.iter().any(|(rl, _)| rl == l));
     }
     // Where every verb the words say is a move, and every thing they name is one they say to go
     // to ("walk to the sofa"), the robot's postures and its place on or in a thing are not
@@ -438,25 +438,17 @@ pub fn candidates(
         let things: Vec<&u32> = named.iter().filter(|&&id| w.node(id).is_some_and(|n| !n.is_room())).collect();
         words.verb_words.iter().flatten().all(moves) && !things.is_empty() && things.into_iter().all(gone_to)
     });
-    if only_moves {
+    // So too, where they say no posture, at a place they say to carry a thing to: the robot
+    // takes it there, and SmolLM2 lay on the sofa it was to bring the apple to.
+    let carried_places: Vec<u32> = wording.map(|words| words.carried.iter().map(|&(_, p)| p).collect()).unwrap_or_default();
+    let carried_only = !carried_places.is_empty() && postures_said.is_empty();
+    if only_moves || carried_only {
+        let settled_on = |to: u32| only_moves || carried_places.contains(&to);
         let on_a_thing = |m: &Meaning| {
             matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to })
-                if *from == robot && !w.node(*to).is_some_and(|n| n.is_room()))
+                if *from == robot && settled_on(*to) && !w.node(*to).is_some_and(|n| n.is_room()))
         };
         out.retain(|(l, m)| !robot_lines.iter().any(|(rl, _)| rl == l) && !on_a_thing(m));
-    }
-    // A place the words say to carry a thing to is where the robot takes it, not where it sits
-    // or lies, where they say no posture: SmolLM2 lay on the sofa it was to bring the apple to.
-    let carried_places: Vec<u32> = wording.map(|words| words.carried.iter().map(|&(_, p)| p).collect()).unwrap_or_default();
-    let posture_said = instruction.is_some_and(|t| {
-        robot_lines.iter().any(|(_, v)| names_verb(t, *v) || wording.is_some_and(|words| words.verb_words.iter().flatten().any(|x| x == v)))
-    });
-    if !carried_places.is_empty() && !posture_said {
-        let on_the_place = |m: &Meaning| {
-            matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to })
-                if *from == robot && carried_places.contains(to) && !w.node(*to).is_some_and(|n| n.is_room()))
-        };
-        out.retain(|(l, m)| !robot_lines.iter().any(|(rl, _)| rl == l) && !on_the_place(m));
     }
     // A state that does not hold and that no action brings about (a door in no room cannot be
     // walked to and closed) is not a goal a plan can meet.
@@ -926,18 +918,21 @@ impl Wording {
         // it was to sit on.
         // (Where they say it is, "pick up the plate in the cabinet", says no place to put it: SmolLM2
         // put the plate on top of the cabinet. In an appliance it may: see `reread` below.)
+        let relations = self.relations();
+        let already = |from: u32, relation: Relation, to: u32| w.holds(&Fact::Edge { from, relation, to });
+        let reread = |from: u32, relation: Relation, to: u32| already(from, relation, to) && is_appliance(w, to);
         let keeps_its_place = |v: &Verb| matches!(v, Verb::Grab | Verb::Sit | Verb::Lie) || USED_IN_PLACE.contains(v);
         let goes = |&(from, relation, to): &(u32, Relation, u32)| {
-            self.put_there.contains(&(from, relation, to)) || !w.holds(&Fact::Edge { from, relation, to }) || is_appliance(w, to)
+            self.put_there.contains(&(from, relation, to)) || !already(from, relation, to) || reread(from, relation, to)
         };
-        for (x, _) in self.said.iter().filter(|(x, v)| keeps_its_place(v) && !self.relations().iter().any(|r| r.0 == *x && goes(r))) {
+        for (x, _) in self.said.iter().filter(|(x, v)| keeps_its_place(v) && !relations.iter().any(|r| r.0 == *x && goes(r))) {
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) if from == x));
         }
         // What the words put somewhere keeps the states no verb they say of it sets ("put the
         // phone on the desk": SmolLM2 read "phone is ON" for it and switched the phone on). Only
         // a thing that can be carried is put anywhere: "a computer in the home office" says where
         // the computer is.
-        for &(x, _, _) in self.relations().iter().filter(|(x, _, to)| can_be_held(w, *x) && !w.node(*to).is_some_and(|n| n.is_room())) {
+        for &(x, _, _) in relations.iter().filter(|(x, _, to)| can_be_held(w, *x) && !w.node(*to).is_some_and(|n| n.is_room())) {
             let verbs = self.verbs_of(x);
             out.retain(|(_, m)| !matches!(m, Meaning::Fact(Fact::State { id, state }) if *id == x && state_verb(*state).is_some_and(|v| !verbs.contains(&v))));
         }
@@ -954,9 +949,7 @@ impl Wording {
         // own programs load a dishwasher with PUTBACK. Of a cupboard or a table it holds: "put
         // the plate in the cabinet" of a plate in it asks nothing, where SmolLM2 put it on top.)
         let other = |r: Relation| if r == Relation::Inside { Relation::On } else { Relation::Inside };
-        let already = |from: u32, relation: Relation, to: u32| w.holds(&Fact::Edge { from, relation, to });
-        let reread = |from: u32, relation: Relation, to: u32| already(from, relation, to) && is_appliance(w, to);
-        for &(from, keep, to) in &self.relations() {
+        for &(from, keep, to) in &relations {
             let edge = |relation| Meaning::Fact(Fact::Edge { from, relation, to });
             if (out.iter().any(|(_, m)| *m == edge(keep)) || already(from, keep, to)) && !reread(from, keep, to) {
                 out.retain(|(_, m)| *m != edge(other(keep)));
