@@ -148,12 +148,17 @@ impl Run<'_> {
                 .cloned()
                 .collect();
             // (nor an appliance's ON line while a line offered puts a thing in it, nor the robot's
-            // way to where a thing is carried before it is taken: see
-            // `Goals::waits_for_a_thing_put_in`, `Goals::waits_for_a_thing_carried`)
+            // way to where a thing is carried before it is taken, nor an action line before what
+            // the words say first of its thing: see `Goals::waits_for_a_thing_put_in`,
+            // `Goals::waits_for_a_thing_carried`, `Goals::waits_for_a_thing_said_first`)
             match self.env.world() {
                 Some(w) => open
                     .iter()
-                    .filter(|l| !self.goals.waits_for_a_thing_put_in(l, w, &open) && !self.goals.waits_for_a_thing_carried(l, w, &open))
+                    .filter(|l| {
+                        !self.goals.waits_for_a_thing_put_in(l, w, &open)
+                            && !self.goals.waits_for_a_thing_carried(l, w, &open)
+                            && !self.goals.waits_for_a_thing_said_first(l, w, &open)
+                    })
                     .cloned()
                     .collect(),
                 None => open,

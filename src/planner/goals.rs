@@ -39,6 +39,9 @@ pub struct Goals {
     meanings: Vec<Meaning>,
     /// Facts not to be undone: the shown goals', or the taken inferred lines'.
     pub kept: Vec<Fact>,
+    /// Kept facts a later line let go (a thing's place the words move it on from, see
+    /// [`Goals::take`]): their lines are not offered again.
+    released: Vec<Fact>,
     /// Verbs a goal names as actions the plan must include (idle steps of these stay offered).
     pub named_verbs: Vec<Verb>,
     /// For inferred lines, the objects the instruction names (see `candidates`).
@@ -61,6 +64,7 @@ impl Goals {
             inferred: false,
             meanings: Vec::new(),
             kept: req.kept.clone(),
+            released: Vec::new(),
             named_verbs: req.named_verbs.clone(),
             named_objects: Vec::new(),
             wording: Wording::default(),
@@ -80,7 +84,7 @@ impl Goals {
     pub fn inferred(w: &World, candidates: Vec<(String, Meaning)>, said: Vec<Vec<String>>, named_objects: Vec<u32>, wording: Wording) -> Goals {
         let (lines, meanings): (Vec<String>, Vec<Meaning>) = candidates.into_iter().unzip();
         let robot = Some(w.character());
-        Goals { lines, inferred: true, meanings, kept: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
+        Goals { lines, inferred: true, meanings, kept: Vec::new(), released: Vec::new(), named_verbs: Vec::new(), named_objects, wording, said, robot }
     }
 
     /// Where the fact an inferred `line` now asks for holds in `w` and the same fact of another
@@ -126,12 +130,20 @@ impl Goals {
     /// took both and its steps went round the dishwasher).
     pub fn contradicts_taken(&self, line: &str) -> bool {
         let placed = |r: &Relation| matches!(r, Relation::On | Relation::Inside);
+        if matches!(self.meaning(line), Some(Meaning::Fact(f)) if self.released.contains(f)) {
+            return true;
+        }
         match self.meaning(line) {
             Some(Meaning::Fact(Fact::State { id, state })) => {
                 self.kept.iter().any(|k| matches!(k, Fact::State { id: i, state: s } if i == id && s != state && opposite(*s) == Some(*state)))
             }
+            // (but a place the words say after the kept one: "heat the bread in the microwave and
+            // put it on the plate", where SmolLM2 stopped with the bread in the microwave)
             Some(Meaning::Fact(Fact::Edge { from, relation, to })) if placed(relation) && Some(*from) != self.robot => {
-                self.kept.iter().any(|k| matches!(k, Fact::Edge { from: f, relation: r, to: t } if f == from && placed(r) && (r, t) != (relation, to)))
+                self.kept.iter().any(|k| {
+                    matches!(k, Fact::Edge { from: f, relation: r, to: t }
+                        if f == from && placed(r) && (r, t) != (relation, to) && !self.wording.said_after((*from, *relation, *to), (*f, *r, *t)))
+                })
             }
             // (a thing put somewhere is not to be held again: SmolLM2 took "character is HOLDS_RH
             // to phone" after the phone was on the desk, and no step could keep both)
@@ -174,6 +186,44 @@ impl Goals {
             && menu.iter().any(|l| {
                 matches!(self.meaning(l), Some(Meaning::Fact(f @ Fact::Edge { relation: Relation::Inside, to, .. })) if to == id && !w.holds(f))
             })
+    }
+
+    /// Whether an action line (`EAT`, `WATCH`) waits for a line of `menu` that a verb said first
+    /// of the same thing brings about: "grab the apple and eat it" is to take it, then eat it
+    /// (SmolLM2 ate the apple where it lay, then picked it up), "turn on the TV and watch it" to
+    /// switch it on first; or a thing's place for a place of it said first. The line is offered
+    /// once that line is taken or met.
+    pub fn waits_for_a_thing_said_first(&self, line: &str, w: &World, menu: &[String]) -> bool {
+        let words = &self.wording;
+        // (so does a thing's place said after another place of it: "heat the bread in the
+        // microwave and put it on the plate" is the microwave first)
+        if let Some(&Meaning::Fact(Fact::Edge { from: x, relation: r @ (Relation::On | Relation::Inside), to })) = self.meaning(line) {
+            let earlier = |l: &String| {
+                matches!(self.meaning(l), Some(Meaning::Fact(f @ Fact::Edge { from, relation: e @ (Relation::On | Relation::Inside), to: t }))
+                    if *from == x && words.said_after((x, r, to), (x, *e, *t)) && !w.holds(f))
+            };
+            return Some(x) != self.robot && menu.iter().any(earlier);
+        }
+        let Some(&Meaning::Verb(v)) = self.meaning(line) else { return false };
+        // (the second of two steps said in turn waits for the first: "turn on the faucet, then
+        // turn it off")
+        let first_of = |u: Verb| words.undone_at_once.iter().any(|&(_, first, then)| then == v && first == u);
+        if menu.iter().any(|l| matches!(self.meaning(l), Some(&Meaning::Verb(u)) if first_of(u))) {
+            return true;
+        }
+        let at = |x: u32, u: Verb| words.said_once.iter().position(|once| once.contains(&(x, u)));
+        let first_made = |l: &String, x: u32, before: usize| {
+            let made_by = |u: Verb| u != v && at(x, u).is_some_and(|j| j < before);
+            match self.meaning(l) {
+                Some(Meaning::Fact(f @ Fact::State { id, state })) => *id == x && !w.holds(f) && state_verb(*state).is_some_and(made_by),
+                Some(Meaning::Fact(f @ Fact::Edge { from, relation: Relation::HoldsRh | Relation::HoldsLh, to })) => {
+                    Some(*from) == self.robot && *to == x && !w.holds(f) && made_by(Verb::Grab)
+                }
+                Some(&Meaning::Verb(u)) => made_by(u),
+                _ => false,
+            }
+        };
+        words.said.iter().filter(|(_, u)| *u == v).any(|&(x, _)| at(x, v).is_some_and(|i| menu.iter().any(|l| first_made(l, x, i))))
     }
 
     /// Whether `line` takes the robot to a place the words say to carry a thing to ("bring the
@@ -228,6 +278,24 @@ impl Goals {
                 if let Fact::Edge { from: x, relation: Relation::On | Relation::Inside, .. } = *f {
                     if Some(x) != self.robot {
                         self.kept.retain(|k| !matches!(k, Fact::Edge { relation: Relation::HoldsRh | Relation::HoldsLh, to, .. } if *to == x));
+                        // A place the words say the thing goes to after another lets the other
+                        // go, and the switch of an appliance it was in: the microwave is switched
+                        // off to be opened and the bread taken out.
+                        let earlier: Vec<Fact> = self
+                            .kept
+                            .iter()
+                            .filter(|k| matches!(k, Fact::Edge { from, relation: Relation::On | Relation::Inside, .. } if *from == x))
+                            .cloned()
+                            .collect();
+                        for e in earlier {
+                            let Fact::Edge { to: place, .. } = e else { continue };
+                            let on = Fact::State { id: place, state: State::On };
+                            for gone in [e, on] {
+                                if let Some(i) = self.kept.iter().position(|k| *k == gone) {
+                                    self.released.push(self.kept.remove(i));
+                                }
+                            }
+                        }
                     }
                 }
                 self.kept.push(f.clone())
@@ -586,6 +654,10 @@ pub struct Wording {
     /// The relations said after a word for putting ("wash the plate and put it in the
     /// cabinet"): where the thing goes, whatever else the words say of it.
     put_there: Vec<(u32, Relation, u32)>,
+    /// A thing a verb is said of and the verb said right after it that undoes it ("turn on the
+    /// faucet, then turn it off", "sit on the chair and then stand up"): nothing is said between,
+    /// so no end state is asked, but the two steps in turn (see `Goals::waits_for_a_thing_said_first`).
+    undone_at_once: Vec<(u32, Verb, Verb)>,
 }
 
 impl Wording {
@@ -595,6 +667,9 @@ impl Wording {
         let mut found = mentions(w, focus, text);
         // A word that says a verb is not also an object ("drink" is not the class drink).
         found.retain(|(k, end, _)| !(*end == k + 1 && says_a_verb(&words[*k])));
+        // An appliance's name said as a verb ("take the milk and microwave it", see
+        // [`appliance_said_as_verb`]) is no thing of a list, nor what a pronoun after it means.
+        let verb_use = |&(k, end, ref ids): &(usize, usize, Vec<u32>)| appliance_as_verb_at(w, &words, k, end, ids);
         // "it" and "them" are what was named last ("put it in the dresser, then close it"), but
         // not the object just before "in" or "on" ("put the apple in it": the fridge named before
         // it, for nothing is put in itself).
@@ -602,7 +677,7 @@ impl Wording {
             if !["it", "them"].contains(&word.as_str()) {
                 continue;
             }
-            let mut before: Vec<&(usize, usize, Vec<u32>)> = found.iter().filter(|(_, end, _)| *end <= k).collect();
+            let mut before: Vec<&(usize, usize, Vec<u32>)> = found.iter().filter(|m| m.1 <= k && !verb_use(m)).collect();
             before.sort_by_key(|(_, end, _)| std::cmp::Reverse(*end));
             let after_in = k > 0 && PARTICLES.contains(&words[k - 1].as_str());
             // Said right after a verb ("wash it", "close it"), it is the last thing named that the
@@ -658,16 +733,20 @@ impl Wording {
         // the knife": commas are not words), each a thing said.
         let joined = |x: &(usize, usize, Vec<u32>), y: &(usize, usize, Vec<u32>)| {
             let between = &words[x.1..y.0.max(x.1)];
-            !between.is_empty() && only(between, &|w| w == "and" || DETERMINERS.contains(&w))
+            !between.is_empty() && only(between, &|w| w == "and" || DETERMINERS.contains(&w)) && !verb_use(y)
         };
         let mut said: Vec<(u32, Verb)> = Vec::new();
         let mut said_once: Vec<Vec<(u32, Verb)>> = Vec::new();
         let mut verb_words: Vec<Vec<Verb>> = Vec::new();
+        // Each verb word in turn (its place, where what it says ends, its verbs, the things they
+        // are said of, if any).
+        let mut turns: Vec<(usize, usize, Vec<Verb>, Vec<u32>)> = Vec::new();
         for k in 0..words.len() {
             // The verbs a word names, or a phrase beginning there; the object may follow its end.
             let (mut verbs, end) = verbs_at(&words, k);
             if !verbs.is_empty() {
                 verb_words.push(verbs.clone());
+                turns.push((k, end, verbs.clone(), Vec::new()));
             }
             let Some(first) = found.iter().position(|(j, _, _)| *j >= end) else { continue };
             let (j, after, _) = &found[first];
@@ -690,6 +769,33 @@ impl Wording {
             }
             for (_, _, ids) in &found[first..=last] {
                 say(&mut said, &mut said_once, ids, &verbs);
+            }
+            let ids: Vec<u32> = found[first..=last].iter().flat_map(|(_, _, ids)| ids.iter().copied()).collect();
+            let ends = found[last].1;
+            match turns.last_mut() {
+                Some(turn) if turn.0 == k => *turn = (k, ends, verbs, ids),
+                _ => turns.push((k, ends, verbs, ids)),
+            }
+        }
+        // (only "and" and "then" between them: "open the microwave, put the bread in it and
+        // close it" says a thing to do in between, and its door is a means)
+        let mut undone_at_once: Vec<(u32, Verb, Verb)> = Vec::new();
+        for pair in turns.windows(2) {
+            let ((_, ends, first, things), (k, _, then, again)) = (&pair[0], &pair[1]);
+            if !only(&words[(*ends).min(*k)..*k], &|x| x == "and" || x == "then") {
+                continue;
+            }
+            for (&v, &u) in first.iter().flat_map(|v| then.iter().map(move |u| (v, u))) {
+                // (a posture is ended by standing up, said of nothing; a state by its opposite,
+                // said of the same thing)
+                let undoes = match u {
+                    Verb::StandUp => matches!(v, Verb::Sit | Verb::Lie) && again.is_empty(),
+                    Verb::WakeUp => v == Verb::Sleep && again.is_empty(),
+                    _ => opposite_verb(v) == Some(u) && state_verb_of(v) && !again.is_empty(),
+                };
+                for &x in things.iter().filter(|x| undoes && (again.is_empty() || again.contains(x))) {
+                    undone_at_once.push((x, v, u));
+                }
             }
         }
         // A word for heating says to switch on the appliance it is done in or on ("heat the milk
@@ -847,12 +953,18 @@ impl Wording {
         taken_from.retain(|&id| {
             !said.iter().any(|(x, _)| *x == id) && found.iter().filter(|(_, _, ids)| ids.contains(&id)).all(|(j, _, _)| after_from(*j))
         });
-        Wording { said, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, taken_from, put_there }
+        Wording { said, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, taken_from, put_there, undone_at_once }
     }
 
     /// "A in B", "A on B" (only articles between): A's relation to B, each the words say.
     pub fn relations(&self) -> Vec<(u32, Relation, u32)> {
         self.relations_once.iter().flatten().copied().collect()
+    }
+
+    /// Whether the words say relation `later` after `earlier` (each as the words first say it).
+    pub fn said_after(&self, later: (u32, Relation, u32), earlier: (u32, Relation, u32)) -> bool {
+        let at = |r| self.relations_once.iter().position(|once| once.contains(&r));
+        matches!((at(later), at(earlier)), (Some(l), Some(e)) if l > e)
     }
 
     /// The verbs said of `id`.
@@ -908,6 +1020,33 @@ impl Wording {
             let alone_on_peers = |m: &Meaning| peers.iter().any(|&y| alone_on(m, y));
             if out.iter().any(|c| alone_on_peers(&c.1) && of_said(c)) {
                 out.retain(|c| !alone_on_peers(&c.1) || of_said(c));
+            }
+        }
+        // Two steps said in turn, the second undoing the first, are action lines: what they set
+        // (the faucet's switch, the robot's posture and its place on the chair) is no end state
+        // the words ask; the lines of other verbs about the thing are left out above. (SmolLM2
+        // did nothing for "turn on the faucet then turn it off", whose "faucet is OFF" held, and
+        // sat on the chair it was to stand up from.)
+        // A state the words set and later undo ("open the fridge, take the milk and close the
+        // fridge") is no end state either: the later is (SmolLM2 took "fridge is OPEN", which
+        // then barred "fridge is CLOSED", and left the fridge open).
+        for (i, once) in self.said_once.iter().enumerate() {
+            for &(x, v) in once.iter().filter(|&&(x, v)| state_verb_of(v) && undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)))) {
+                out.retain(|(_, m)| !matches!(*m, Meaning::Fact(Fact::State { id, state }) if id == x && state_verb(state) == Some(v)));
+            }
+        }
+        for &(x, first, then) in &self.undone_at_once {
+            let set_by = |l: &str, m: &Meaning| match *m {
+                Meaning::Fact(Fact::State { id, state }) if id == x => state_verb(state).is_some_and(|v| v == first || v == then),
+                Meaning::Fact(Fact::State { id, .. }) if id == robot => made_by.iter().any(|(ml, v)| ml == l && *v == first),
+                Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, to }) => from == robot && to == x,
+                _ => false,
+            };
+            out.retain(|(l, m)| !set_by(l, m));
+            for v in [first, then] {
+                if !out.iter().any(|(_, m)| *m == Meaning::Verb(v)) {
+                    out.push((v.name().to_string(), Meaning::Verb(v)));
+                }
             }
         }
         // What the words say to take ("take a book from the shelf and read it") stays in hand
@@ -973,6 +1112,10 @@ impl Wording {
         // already) is met: its line is a group, kept among the candidates, so the root can take it
         // and the user is told it holds. (Without it, the words said nothing the root could take,
         // and SmolLM2 turned to the coffee table.)
+        for &(_, first, then) in &self.undone_at_once {
+            add(vec![first.name().to_string()]);
+            add(vec![then.name().to_string()]);
+        }
         let mut met: Vec<String> = Vec::new();
         let stored: Vec<Vec<(u32, Relation, u32)>> = self.stored.iter().map(|&(x, c)| vec![(x, Relation::Inside, c)]).collect();
         for once in self.relations_once.iter().chain(&stored) {
@@ -1052,6 +1195,11 @@ fn articles_before(words: &[String], j: usize) -> usize {
 /// is said in one of the `later` entries: the words end there, so the earlier is not a thing said.
 fn undone_later<T: PartialEq>(later: &[Vec<T>], undo: Option<T>) -> bool {
     undo.is_some_and(|u| later.iter().flatten().any(|x| *x == u))
+}
+
+/// Whether `v` sets one of an object's two states (a switch, a door, a plug).
+fn state_verb_of(v: Verb) -> bool {
+    matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut)
 }
 
 /// The verb that undoes what `v` does, for the verbs of the two-state pairs and the postures.
@@ -1372,6 +1520,14 @@ fn appliance_said_as_verb(w: &World, words: &[String], found: &[(usize, usize, V
         let held = thing.iter().any(|&id| can_be_held(w, id));
         (begins && !heater.is_empty() && articles_before(words, *j) == *end && held).then(|| (thing.clone(), heater))
     })
+}
+
+/// Whether the mention of words `k..end` is an appliance's name said as a verb before a pronoun
+/// ("… and microwave it"): first in a clause, with no article, and only appliances named.
+fn appliance_as_verb_at(w: &World, words: &[String], k: usize, end: usize, ids: &[u32]) -> bool {
+    let begins = k == 0 || ["and", "then", "please", "now"].contains(&words[k - 1].as_str());
+    let pronoun = words.get(end).is_some_and(|x| x == "it" || x == "them");
+    begins && pronoun && !ids.is_empty() && ids.iter().all(|&id| is_appliance(w, id))
 }
 
 /// Where the words say to put things away and not where ("put away the groceries", "put the
@@ -2093,6 +2249,12 @@ mod tests {
         assert_eq!((later.relations(), later.said), (vec![(13, Relation::Inside, 15)], vec![(10, Verb::Open), (15, Verb::SwitchOn)]));
         assert!(of("open the microwave").relations().is_empty());
         assert!(of("the microwave the milk is in").said.is_empty());
+        // Said as the verb before a pronoun, it is no thing of a list ("take" is not said of the
+        // microwave) and "it" is the milk: SmolLM2 switched the microwave on and off, then took
+        // the milk.
+        let taken = of("take the milk and microwave it");
+        assert_eq!((taken.relations(), taken.said), (vec![(13, Relation::Inside, 15)], vec![(13, Verb::Grab), (15, Verb::SwitchOn)]));
+        assert_eq!(of("take the milk and the microwave").said, [(13, Verb::Grab), (15, Verb::Grab)]);
         // A thing carried to a place is taken there in hand: the mug (25) is taken and the sink
         // (20) walked to; going to a place after taking a thing carries it nowhere in words.
         let carry = of("take the mug to the sink");
@@ -2480,5 +2642,67 @@ mod tests {
         assert!(!g.kept.iter().any(|k| matches!(k, Fact::Edge { relation: Relation::HoldsRh, .. })), "{:?}", g.kept);
         assert!(g.contradicts_taken("character is HOLDS_RH to apple"));
         assert_eq!(g.named_verbs, [Verb::Touch]);
+    }
+
+    #[test]
+    fn two_steps_said_in_turn_are_action_lines() {
+        let w = World::demo();
+        let read = |focus: &[u32], t: &str| {
+            let words = Wording::of(&w, focus, t);
+            let (lines, said) = candidates(&w, focus, &[], Some(t), focus, Some(&words));
+            (words, lines.into_iter().map(|(l, _)| l).collect::<Vec<_>>(), said)
+        };
+        // The faucet (21) on, then off, "and"/"then" alone between: two action lines in turn, and
+        // no line of its switch (its OFF held, and the root had nothing to do).
+        let (words, lines, said) = read(&[21], "turn on the faucet then turn it off");
+        assert_eq!(words.undone_at_once, [(21, Verb::SwitchOn, Verb::SwitchOff)]);
+        assert_eq!(said, [["SWITCHON"], ["SWITCHOFF"]]);
+        assert!(!lines.iter().any(|l| l.starts_with("faucet is")), "{lines:?}");
+        // Sitting on the chair (19), then standing up: no posture is an end state.
+        let (words, lines, said) = read(&[19], "sit on the chair and then stand up");
+        assert_eq!(words.undone_at_once, [(19, Verb::Sit, Verb::StandUp)]);
+        assert_eq!(said, [["SIT"], ["STANDUP"]]);
+        assert!(!lines.iter().any(|l| l == "character is SITTING" || l == "character is ON to chair"), "{lines:?}");
+        // A thing to do between them: the door is a means, the later state the end.
+        let (words, lines, said) = read(&[15, 14], "open the microwave, put the bread in it and close it");
+        assert!(words.undone_at_once.is_empty());
+        assert!(!lines.iter().any(|l| l == "OPEN" || l == "microwave is OPEN"), "{lines:?}");
+        assert!(said.iter().any(|g| g == &["microwave is CLOSED"]), "{said:?}");
+        // A state set and undone later is no line (SmolLM2 took "fridge is OPEN" and left it so).
+        let (_, lines, _) = read(&[10, 13], "open the fridge, take the milk and close the fridge");
+        assert!(!lines.iter().any(|l| l == "fridge is OPEN") && lines.iter().any(|l| l == "fridge is CLOSED"), "{lines:?}");
+        assert!(read(&[10, 13], "open the fridge and take the milk").1.iter().any(|l| l == "fridge is OPEN"));
+    }
+
+    #[test]
+    fn a_place_said_after_another_lets_the_other_go() {
+        let w = World::demo();
+        let focus = [14, 15, 17];
+        let t = "heat the bread in the microwave and put it on the plate";
+        let words = Wording::of(&w, &focus, t);
+        let (c, said) = candidates(&w, &focus, &[], Some(t), &focus, Some(&words));
+        let mut g = Goals::inferred(&w, c, said, focus.to_vec(), words);
+        let (inside, on, plate) = ("bread is INSIDE to microwave", "microwave is ON", "bread is ON to plate");
+        let fresh = g.clone();
+        // The plate is said after the microwave: it waits while the microwave's line is offered,
+        // and is offered once that is taken.
+        assert!(g.waits_for_a_thing_said_first(plate, &w, &g.lines) && !g.waits_for_a_thing_said_first(inside, &w, &g.lines));
+        g.take(inside);
+        g.take(on);
+        assert!(!g.contradicts_taken(plate));
+        g.take(plate);
+        // Taken, it lets go the bread's place in the microwave and the microwave's switch (it
+        // is switched off to be opened), and neither is offered again.
+        assert_eq!(g.kept, [Fact::Edge { from: 14, relation: Relation::On, to: 17 }]);
+        assert!(g.contradicts_taken(inside) && g.contradicts_taken(on));
+        // The plate taken first, the microwave said before it is not offered.
+        let mut g = fresh;
+        g.take(plate);
+        assert!(g.contradicts_taken(inside));
+        // Said the other way round, the microwave is not offered once the plate is taken.
+        let t = "put the bread on the plate, then put the bread in the microwave";
+        let words = Wording::of(&w, &focus, t);
+        assert!(words.said_after((14, Relation::Inside, 15), (14, Relation::On, 17)));
+        assert!(!words.said_after((14, Relation::On, 17), (14, Relation::Inside, 15)));
     }
 }

@@ -293,7 +293,11 @@ impl Run<'_> {
         // empty plan alone)
         let holding: Vec<&String> =
             self.goals.said.iter().flatten().filter(|l| self.goals.holds_at_start(l, w)).collect();
-        self.trace.event("goal_candidates", json!({"lines": self.goals.lines, "said": self.goals.said, "holding": holding}));
+        // (and which wait, at the start, for a line of what the words say before them: the
+        // order they give, `Goals::waits_for_a_thing_said_first`)
+        let lines = &self.goals.lines;
+        let waiting: Vec<&String> = lines.iter().filter(|l| self.goals.waits_for_a_thing_said_first(l, w, lines)).collect();
+        self.trace.event("goal_candidates", json!({"lines": lines, "said": self.goals.said, "holding": holding, "waiting": waiting}));
     }
 
     /// Puts the prompts' shared beginning in the model's cache before the first call: the system

@@ -128,6 +128,9 @@ impl Run<'_> {
             .iter()
             .filter(|l| st.reoffered.iter().filter(|r| r == l).count() < REOFFERS)
             .filter(|l| self.line_fact(l).is_some_and(|f| !w.holds(f)))
+            // (not a line a later one let go: the bread's place in the microwave, once it is to
+            // be on the plate)
+            .filter(|l| !self.goals.contradicts_taken(l))
             .cloned()
             .collect();
         for line in undone {
