@@ -961,10 +961,13 @@ impl Wording {
         self.relations_once.iter().flatten().copied().collect()
     }
 
-    /// Whether the words say relation `later` after `earlier` (each as the words first say it).
+    /// Whether the words say relation `later` after every time they say `earlier` ("Put the
+    /// groceries in the fridge. … I place them on the counter and … in the fridge" orders
+    /// neither).
     pub fn said_after(&self, later: (u32, Relation, u32), earlier: (u32, Relation, u32)) -> bool {
-        let at = |r| self.relations_once.iter().position(|once| once.contains(&r));
-        matches!((at(later), at(earlier)), (Some(l), Some(e)) if l > e)
+        let first = self.relations_once.iter().position(|once| once.contains(&later));
+        let last = self.relations_once.iter().rposition(|once| once.contains(&earlier));
+        matches!((first, last), (Some(l), Some(e)) if l > e)
     }
 
     /// The verbs said of `id`.
