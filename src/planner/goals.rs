@@ -1025,19 +1025,19 @@ impl Wording {
                 out.retain(|c| !alone_on_peers(&c.1) || of_said(c));
             }
         }
-        // Two steps said in turn, the second undoing the first, are action lines: what they set
-        // (the faucet's switch, the robot's posture and its place on the chair) is no end state
-        // the words ask; the lines of other verbs about the thing are left out above. (SmolLM2
-        // did nothing for "turn on the faucet then turn it off", whose "faucet is OFF" held, and
-        // sat on the chair it was to stand up from.)
         // A state the words set and later undo ("open the fridge, take the milk and close the
-        // fridge") is no end state either: the later is (SmolLM2 took "fridge is OPEN", which
-        // then barred "fridge is CLOSED", and left the fridge open).
+        // fridge") is no end state: the later one is (SmolLM2 took "fridge is OPEN", which then
+        // barred "fridge is CLOSED", and left the fridge open).
         for (i, once) in self.said_once.iter().enumerate() {
             for &(x, v) in once.iter().filter(|&&(x, v)| state_verb_of(v) && undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)))) {
                 out.retain(|(_, m)| !matches!(*m, Meaning::Fact(Fact::State { id, state }) if id == x && state_verb(state) == Some(v)));
             }
         }
+        // Two steps said in turn, the second undoing the first, are action lines: what they set
+        // (the faucet's switch, the robot's posture and its place on the chair) is no end state
+        // the words ask; the lines of other verbs about the thing are left out above. (SmolLM2
+        // did nothing for "turn on the faucet then turn it off", whose "faucet is OFF" held, and
+        // sat on the chair it was to stand up from.)
         for &(x, first, then) in &self.undone_at_once {
             let set_by = |l: &str, m: &Meaning| match *m {
                 Meaning::Fact(Fact::State { id, state }) if id == x => state_verb(state).is_some_and(|v| v == first || v == then),
