@@ -693,8 +693,7 @@ impl Wording {
             let affords = |ids: &[u32]| {
                 ids.iter().any(|&id| (putting && can_be_held(w, id)) || verbs.iter().any(|&v| v.arity() == 1 && slot_admits(w, v, 0, id)))
             };
-            let works_a_place =
-                verbs.iter().any(|v| matches!(v, Verb::Open | Verb::Close | Verb::SwitchOn | Verb::SwitchOff | Verb::PlugIn | Verb::PlugOut));
+            let works_a_place = verbs.iter().any(|&v| state_verb_of(v));
             // (after "in" or "on", an article and one more word aside: "on the dinner table")
             let a_place = |j: usize| {
                 let i = articles_before(&words, j);
@@ -1028,8 +1027,10 @@ impl Wording {
         // A state the words set and later undo ("open the fridge, take the milk and close the
         // fridge") is no end state: the later one is (SmolLM2 took "fridge is OPEN", which then
         // barred "fridge is CLOSED", and left the fridge open).
+        // (the `i`th thing said, verb `v` of `x`, undone by a later one)
+        let undone = |i: usize, x: u32, v: Verb| undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)));
         for (i, once) in self.said_once.iter().enumerate() {
-            for &(x, v) in once.iter().filter(|&&(x, v)| state_verb_of(v) && undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)))) {
+            for &(x, v) in once.iter().filter(|&&(x, v)| state_verb_of(v) && undone(i, x, v)) {
                 out.retain(|(_, m)| !matches!(*m, Meaning::Fact(Fact::State { id, state }) if id == x && state_verb(state) == Some(v)));
             }
         }
@@ -1104,7 +1105,7 @@ impl Wording {
             }
         };
         for (i, once) in self.said_once.iter().enumerate() {
-            if once.iter().any(|&(x, v)| undone_later(&self.said_once[i + 1..], opposite_verb(v).map(|o| (x, o)))) {
+            if once.iter().any(|&(x, v)| undone(i, x, v)) {
                 continue;
             }
             let of = |(l, m): &&(String, Meaning)| once.iter().any(|&(x, v)| alone_on(m, x) && verbs_of_line(l, m).contains(&v));
@@ -1518,7 +1519,7 @@ fn implied_heater(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
 fn appliance_said_as_verb(w: &World, words: &[String], found: &[(usize, usize, Vec<u32>)]) -> Option<(Vec<u32>, Vec<u32>)> {
     found.windows(2).find_map(|pair| {
         let ((k, end, named), (j, _, thing)) = (&pair[0], &pair[1]);
-        let begins = *k == 0 || ["and", "then", "please", "now"].contains(&words[k - 1].as_str());
+        let begins = begins_a_clause(words, *k);
         let heater: Vec<u32> = named.iter().copied().filter(|&id| is_appliance(w, id)).collect();
         let held = thing.iter().any(|&id| can_be_held(w, id));
         (begins && !heater.is_empty() && articles_before(words, *j) == *end && held).then(|| (thing.clone(), heater))
@@ -1528,9 +1529,14 @@ fn appliance_said_as_verb(w: &World, words: &[String], found: &[(usize, usize, V
 /// Whether the mention of words `k..end` is an appliance's name said as a verb before a pronoun
 /// ("… and microwave it"): first in a clause, with no article, and only appliances named.
 fn appliance_as_verb_at(w: &World, words: &[String], k: usize, end: usize, ids: &[u32]) -> bool {
-    let begins = k == 0 || ["and", "then", "please", "now"].contains(&words[k - 1].as_str());
     let pronoun = words.get(end).is_some_and(|x| x == "it" || x == "them");
-    begins && pronoun && !ids.is_empty() && ids.iter().all(|&id| is_appliance(w, id))
+    begins_a_clause(words, k) && pronoun && !ids.is_empty() && ids.iter().all(|&id| is_appliance(w, id))
+}
+
+/// Whether word `k` is first in a clause: the text's first, or after "and", "then", "please" or
+/// "now" (where a verb would stand).
+fn begins_a_clause(words: &[String], k: usize) -> bool {
+    k == 0 || ["and", "then", "please", "now"].contains(&words[k - 1].as_str())
 }
 
 /// Where the words say to put things away and not where ("put away the groceries", "put the
