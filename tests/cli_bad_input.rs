@@ -305,6 +305,22 @@ fn an_instruction_naming_an_object_the_scene_lacks_is_warned_about_and_reported(
 }
 
 #[test]
+fn an_instruction_naming_nothing_the_scene_has_is_an_error_before_the_model_loads() {
+    // SmolLM2 looked at the apple for "look at the clock" and found the apple for "make some
+    // toast": the warning was printed, and a plan of something else followed.
+    for (instruction, missing) in [("look at the clock", "\"clock\""), ("go to the kitchen and make some toast", "\"toast\"")] {
+        let o = run(&["plan", instruction, "-m", "/nonexistent.gguf"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{instruction}: {err}");
+        assert!(err.contains("nothing was planned") && err.contains(missing) && err.contains("--scene FILE"), "{instruction}: {err}");
+        assert!(!err.contains("model not found"), "{instruction}: {err}");
+    }
+    // One thing of the scene named is enough to plan (and then the model is looked for).
+    let o = run(&["plan", "put the unicorn in the fridge", "-m", "/nonexistent.gguf"]);
+    assert!(stderr(&o).contains("model not found") && !stderr(&o).contains("nothing was planned"), "{}", stderr(&o));
+}
+
+#[test]
 fn a_blank_instruction_is_an_error_before_the_model_loads() {
     for blank in ["", "   "] {
         for args in [&["plan", blank][..], &["bench", "nodes", "--instruction", blank]] {

@@ -87,6 +87,9 @@ fn step_plan_on_the_demo_does_what_plain_instructions_say() {
         ("put the bread on the plate", "[PUTBACK] <bread> (14) <plate> (17)"),
         ("put the apple in the fridge", "[PUTIN] <apple> (12) <fridge> (10)"),
         ("close the door", "[CLOSE] <door> (27)"),
+        // (it lay down on the sofa it was to go to, and kept the book it was to put back)
+        ("go to the sofa", "[WALK] <sofa> (30)"),
+        ("take the book, read it and put it back", "[PUTBACK] <book> (34) <coffee_table> (33)"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_step"))
             .args(["plan", instruction, "--json", "--quiet", "--model"])

@@ -359,8 +359,14 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let (world, task) = load_scene(&scene)?;
     let req = request(args.instruction.as_deref(), args.context.clone(), &world, task.as_ref(), args.oracle_stop)?;
     let unknown = crate::planner::goals::unknown_objects(&world, &req.instruction);
+    // An instruction given here whose things are all missing ("look at the clock") is not
+    // planned: the model would act on something else (SmolLM2 looked at the apple), and nothing
+    // it did would be what was asked. (A task's own text is planned as the benchmark asks.)
+    if args.instruction.is_some() && !unknown.is_empty() && names_no_thing(&world, &req.instruction) {
+        bail!("{}", unknown_note(&unknown, &world, true));
+    }
     if !unknown.is_empty() {
-        eprintln!("warning: {}", unknown_note(&unknown, &world));
+        eprintln!("warning: {}", unknown_note(&unknown, &world, false));
     }
     for missing in crate::planner::goals::missing_tools(&world, &req.focus_in(&world), &req.instruction) {
         eprintln!("warning: {missing}");
@@ -400,8 +406,9 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
 }
 
 /// The warning for instruction phrases that name no object of the scene, with what the scene does
-/// have, so that the user can reword the instruction or give another scene.
-fn unknown_note(unknown: &[String], world: &World) -> String {
+/// have, so that the user can reword the instruction or give another scene (`alone`: it names
+/// nothing else).
+fn unknown_note(unknown: &[String], world: &World, alone: bool) -> String {
     let kinds: std::collections::BTreeSet<&str> = world
         .nodes()
         .filter(|n| n.id != world.character() && !n.is_room())
@@ -409,12 +416,20 @@ fn unknown_note(unknown: &[String], world: &World) -> String {
         .collect();
     let listed: Vec<&str> = kinds.iter().copied().take(40).collect();
     let more = if kinds.len() > listed.len() { format!(" and {} more", kinds.len() - listed.len()) } else { String::new() };
+    let (lead, nothing_else) = if alone { ("nothing was planned: ", ", and it names no other object of the scene") } else { ("", "") };
     format!(
-        "the instruction names {}, and no object of the scene is called that; the planner can only use \
-         the scene's objects ({}{more}): reword the instruction, or give a scene that has it (--scene FILE)",
+        "{lead}the instruction names {}, and no object of the scene is called that{nothing_else}; the planner can \
+         only use the scene's objects ({}{more}): reword the instruction, or give a scene that has it (--scene FILE)",
         quoted(unknown),
         listed.join(", ")
     )
+}
+
+/// Whether `instruction` names no object of `world` but rooms.
+fn names_no_thing(world: &World, instruction: &str) -> bool {
+    let all: Vec<u32> = world.nodes().map(|n| n.id).collect();
+    let named = crate::planner::goals::instruction_objects(world, &all, instruction);
+    named.iter().all(|&id| world.node(id).is_some_and(|n| n.is_room()))
 }
 
 /// `"a", "b"`: the phrases as the warning and the note quote them.

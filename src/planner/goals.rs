@@ -202,7 +202,16 @@ impl Goals {
                 matches!(self.meaning(l), Some(Meaning::Fact(f @ Fact::Edge { from, relation: e @ (Relation::On | Relation::Inside), to: t }))
                     if *from == x && words.said_after((x, r, to), (x, *e, *t)) && !w.holds(f))
             };
-            return Some(x) != self.robot && menu.iter().any(earlier);
+            // (and a thing put back waits for what the words say to do with it, an action line or
+            // a state of it: "take the book, read it and put it back" reads it first, SmolLM2 put
+            // it back and stopped; "wash it and put it back" washes it)
+            let used = |l: &String| match self.meaning(l) {
+                Some(&Meaning::Verb(u)) => u != Verb::Grab && words.said.contains(&(x, u)),
+                Some(Meaning::Fact(f @ Fact::State { id, .. })) => *id == x && !w.holds(f),
+                _ => false,
+            };
+            let put_back = words.put_back.contains(&(x, r, to)) && menu.iter().any(used);
+            return Some(x) != self.robot && (menu.iter().any(earlier) || put_back);
         }
         let Some(&Meaning::Verb(v)) = self.meaning(line) else { return false };
         // (the second of two steps said in turn waits for the first: "turn on the faucet, then
@@ -521,6 +530,15 @@ pub fn candidates(
     // A state that does not hold and that no action brings about (a door in no room cannot be
     // walked to and closed) is not a goal a plan can meet.
     out.retain(|(l, m)| !matches!(m, Meaning::Fact(f @ Fact::State { .. }) if !w.holds(f) && !made_by.iter().any(|(ml, _)| ml == l)));
+    // A thing the words name only as where another goes ("… put the bread on the plate") stays
+    // where it is, and is not taken in hand: SmolLM2 put the plate into the microwave the bread
+    // was heated in.
+    let place_only = |id: u32| wording.is_some_and(|words| words.places_only.contains(&id) && words.verbs_of(id).is_empty());
+    out.retain(|(_, m)| match m {
+        Meaning::Fact(Fact::Edge { from, relation: Relation::On | Relation::Inside, .. }) => !place_only(*from),
+        Meaning::Fact(Fact::Edge { from, relation: Relation::HoldsRh | Relation::HoldsLh, to }) => *from != robot || !place_only(*to),
+        _ => true,
+    });
     // An object is put inside something that holds things (the executor lets PUTIN name a desk:
     // SmolLM2 put the phone it was to pick up "INSIDE to desk").
     // Or a drink the words put in a vessel ("pour the milk into the mug": POUR makes it so, and
@@ -654,6 +672,11 @@ pub struct Wording {
     /// The relations said after a word for putting ("wash the plate and put it in the
     /// cabinet"): where the thing goes, whatever else the words say of it.
     put_there: Vec<(u32, Relation, u32)>,
+    /// The places things are put back to ("read it and put it back": where it was at the start).
+    put_back: Vec<(u32, Relation, u32)>,
+    /// Things each mention of which is where another thing goes ("… and put it on the plate"):
+    /// they stay where they are.
+    places_only: Vec<u32>,
     /// A thing a verb is said of and the verb said right after it that undoes it ("turn on the
     /// faucet, then turn it off", "sit on the chair and then stand up"): nothing is said between,
     /// so no end state is asked, but the two steps in turn (see `Goals::waits_for_a_thing_said_first`).
@@ -685,7 +708,13 @@ impl Wording {
             // switches it), a thing acted on before a place it was put in or on: "put the mug in
             // the sink and wash it" is the mug (SmolLM2 washed the sink), "put the box in the
             // oven, close it" the oven, "take the book from the shelf and read it" the book.
-            let verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
+            // (or split round it, "turn it off": the faucet turned on, not the mug washed since)
+            let mut verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
+            if k > 0 && !after_in && verbs.is_empty() {
+                let split = |(p, _): &&(&[&str], &[Verb])| p.len() == 2 && PARTICLES.contains(&p[1]) && words[k - 1] == p[0];
+                let around = VERB_PHRASES.iter().filter(split).filter(|(p, _)| words.get(k + 1).is_some_and(|x| x == p[1]));
+                verbs = around.flat_map(|(_, of)| of.iter().copied()).collect();
+            }
             // (after a word for putting, which names no verb of the embodiment: a thing a hand
             // can hold; "take the apple from the counter and put it on the plate" is the apple,
             // where SmolLM2 was asked to put the counter on the plate)
@@ -869,8 +898,14 @@ impl Wording {
             }
         };
         let next_relation: Vec<Option<Relation>> = found.windows(2).map(|p| relation_between(&p[0], &p[1])).collect();
+        let a_place = |q: usize| q > 0 && next_relation[q - 1].is_some();
+        let mut places_only: Vec<u32> = found.iter().enumerate().filter(|&(q, _)| a_place(q)).flat_map(|(_, m)| m.2.iter().copied()).collect();
+        places_only.retain(|id| found.iter().enumerate().all(|(q, m)| a_place(q) || !m.2.contains(id)));
+        places_only.sort_unstable();
+        places_only.dedup();
         let mut relations_once: Vec<Vec<(u32, Relation, u32)>> = Vec::new();
         let mut put_there: Vec<(u32, Relation, u32)> = Vec::new();
+        let mut put_back: Vec<(u32, Relation, u32)> = Vec::new();
         for (p, relation) in next_relation.iter().enumerate() {
             let Some(relation) = *relation else { continue };
             // The relation's first object, and those joined to it before it (not past the place
@@ -891,6 +926,19 @@ impl Wording {
                     put_there.extend(pairs.iter().copied());
                 }
                 relations_once.push(pairs);
+            }
+        }
+        // "Put it back", where no place follows: where the thing was at the start ("take the book
+        // from the table, read it and put it back": SmolLM2 kept it in hand).
+        for (f, (k, end, ids)) in found.iter().enumerate() {
+            let i = articles_before(&words, *k);
+            let put = i > 0 && PUTTING.contains(&words[i - 1].as_str());
+            let back = words.get(*end).is_some_and(|x| x == "back");
+            if put && back && next_relation.get(f).copied().flatten().is_none() {
+                let pairs: Vec<(u32, Relation, u32)> = ids.iter().filter_map(|&id| place_at_start(w, id).map(|(r, to)| (id, r, to))).collect();
+                put_there.extend(pairs.iter().copied());
+                put_back.extend(pairs.iter().copied());
+                relations_once.extend(Some(pairs).filter(|p| !p.is_empty()));
             }
         }
         // "Fill A with B": B in A ("fill the mug with milk": the milk poured in; SmolLM2 opened the
@@ -952,7 +1000,7 @@ impl Wording {
         taken_from.retain(|&id| {
             !said.iter().any(|(x, _)| *x == id) && found.iter().filter(|(_, _, ids)| ids.contains(&id)).all(|(j, _, _)| after_from(*j))
         });
-        Wording { said, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, taken_from, put_there, undone_at_once }
+        Wording { said, said_once, relations_once, verb_words, plural, seated, stored, carried: carried_to, taken_from, put_there, put_back, places_only, undone_at_once }
     }
 
     /// "A in B", "A on B" (only articles between): A's relation to B, each the words say.
@@ -1253,12 +1301,23 @@ fn verbs_at(words: &[String], k: usize) -> (Vec<Verb>, usize) {
     let mut end = k + 1;
     for (phrase, of) in VERB_PHRASES {
         let fits = |(x, p): (&String, &&str)| x == p || (p.len() >= 4 && x.starts_with(p));
-        if words.len() >= k + phrase.len() && words[k..].iter().zip(phrase.iter()).all(fits) {
+        let idiom = of == &[Verb::Walk] && going_to_use(words, k + phrase.len());
+        if words.len() >= k + phrase.len() && words[k..].iter().zip(phrase.iter()).all(fits) && !idiom {
             verbs.extend(of.iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
             end = end.max(k + phrase.len());
         }
     }
     (verbs, end)
+}
+
+/// Things one "goes to" to use: "go to the toilet", "go to bed" say no walk (EAI's "Go to toilet"
+/// is to sit on it).
+const GOING_TO_USE: &[&str] = &["toilet", "bed"];
+
+/// Whether the words from `k` on, articles aside, begin with one of [`GOING_TO_USE`].
+fn going_to_use(words: &[String], k: usize) -> bool {
+    let i = (k..words.len()).find(|&i| !DETERMINERS.contains(&words[i].as_str())).unwrap_or(words.len());
+    words.get(i).is_some_and(|x| GOING_TO_USE.contains(&x.as_str()))
 }
 
 /// Whether `word` says a verb, alone or as the first word of a phrase ("switch on").
@@ -1297,6 +1356,11 @@ pub(super) const WASHING: &[Verb] = &[Verb::Wash, Verb::Scrub, Verb::Wipe, Verb:
 /// its longer forms ("turning", "switched").
 const VERB_PHRASES: &[(&[&str], &[Verb])] = &[
     (&["pick", "up"], &[Verb::Grab]),
+    // Going to a thing is walking to it ("go to the sofa": SmolLM2 lay down on it), but for the
+    // idioms of [`GOING_TO_USE`]; ("going to" says what is to come: only the short forms).
+    (&["go", "to"], &[Verb::Walk]),
+    (&["goes", "to"], &[Verb::Walk]),
+    (&["went", "to"], &[Verb::Walk]),
     (&["take"], &[Verb::Grab]),
     (&["hold"], &[Verb::Grab]),
     // What is brought or carried is held ("bring me the remote": SmolLM2 switched the remote on).
@@ -1553,6 +1617,13 @@ fn implied_stores(w: &World, focus: &[u32], words: &[String], found: &[(usize, u
 /// Where `thing` is put away already: inside something that opens (the plate in the cabinet).
 fn stored_in(w: &World, thing: u32) -> Option<u32> {
     w.related(thing, Relation::Inside).into_iter().find(|&c| w.node(c).is_some_and(|n| n.properties.contains(Property::CanOpen)))
+}
+
+/// Where `thing` is in or on something, not a room: where it is put back to.
+fn place_at_start(w: &World, thing: u32) -> Option<(Relation, u32)> {
+    let not_room = |&to: &u32| !w.node(to).is_some_and(|n| n.is_room());
+    let inside = w.related(thing, Relation::Inside).into_iter().find(not_room).map(|to| (Relation::Inside, to));
+    inside.or_else(|| w.related(thing, Relation::On).into_iter().find(not_room).map(|to| (Relation::On, to)))
 }
 
 /// The things the words say to put away and not where ([`implied_stores`]), put away already
@@ -2066,9 +2137,12 @@ mod tests {
         assert!(!walk.iter().any(|l| l == "character is SITTING" || l == "character is ON to sofa"), "{walk:?}");
         let (sit, _) = lines("walk to the sofa and sit on it");
         assert!(sit.iter().any(|l| l == "character is SITTING") && sit.iter().any(|l| l == "character is ON to sofa"), "{sit:?}");
-        // A thing named and not gone to keeps them: "walk to the kitchen and go to the sofa".
-        let (go, _) = lines("walk to the kitchen and go to the sofa");
+        // A thing named and not gone to keeps them: "walk to the living room and use the sofa";
+        // gone to, it does not ("go to" is a walk).
+        let (go, _) = lines("walk to the living room and use the sofa");
         assert!(go.iter().any(|l| l == "character is SITTING"), "{go:?}");
+        let (go, _) = lines("walk to the kitchen and go to the sofa");
+        assert!(!go.iter().any(|l| l == "character is SITTING"), "{go:?}");
         // The words for wiping name a cloth (the rag, 26), as those for cutting a knife.
         assert!(named_in(&w, "wipe the kitchen counter").contains(&26));
         assert!(!named_in(&w, "put the kitchen counter in order").contains(&26));
@@ -2269,7 +2343,8 @@ mod tests {
         let carry = of("take the mug to the sink");
         assert_eq!((carry.relations(), carry.said), (vec![], vec![(25, Verb::Grab), (20, Verb::Walk)]));
         assert_eq!(of("bring the apple to the kitchen table").said, [(12, Verb::Grab), (18, Verb::Walk)]);
-        assert_eq!(of("take the mug and go to the sink").said, [(25, Verb::Grab)]);
+        let go = of("take the mug and go to the sink");
+        assert_eq!((go.said, go.carried), (vec![(25, Verb::Grab), (20, Verb::Walk)], vec![]));
     }
 
     #[test]
@@ -2713,5 +2788,65 @@ mod tests {
         let words = Wording::of(&w, &focus, t);
         assert!(words.said_after((14, Relation::Inside, 15), (14, Relation::On, 17)));
         assert!(!words.said_after((14, Relation::On, 17), (14, Relation::Inside, 15)));
+        // The plate, named only as where the bread goes, has no place of its own on offer
+        // (SmolLM2 put it into the microwave); where the words put it, it has.
+        let (c, _) = candidates(&w, &focus, &[], Some(t), &focus, Some(&Wording::of(&w, &focus, t)));
+        assert!(!c.iter().any(|(l, _)| l.starts_with("plate is") || l.ends_with("to plate") && l.contains("HOLDS")), "{c:?}");
+        let t = "put the bread on the plate and put the plate on the kitchen table";
+        let focus = [14, 16, 17, 18];
+        let (c, _) = candidates(&w, &focus, &[], Some(t), &focus, Some(&Wording::of(&w, &focus, t)));
+        assert!(c.iter().any(|(l, _)| l == "plate is ON to kitchentable"), "{c:?}");
+    }
+
+    #[test]
+    fn going_to_a_thing_is_walking_to_it() {
+        let w = World::demo();
+        let read = |focus: &[u32], t: &str| {
+            let words = Wording::of(&w, focus, t);
+            let (lines, said) = candidates(&w, focus, &[], Some(t), focus, Some(&words));
+            (lines.into_iter().map(|(l, _)| l).collect::<Vec<_>>(), said)
+        };
+        // "Go to the sofa" is "walk to the sofa": no posture (SmolLM2 lay down on it).
+        let (lines, said) = read(&[30], "go to the sofa");
+        assert_eq!(said, [["character is CLOSE to sofa"]]);
+        assert!(!lines.iter().any(|l| l == "character is LYING" || l == "character is SITTING" || l == "character is ON to sofa"), "{lines:?}");
+        let words = words_of("I went to the sink, then go to the toilet and go to bed; going to the bedroom");
+        let walks: Vec<usize> = (0..words.len()).filter(|&k| verbs_at(&words, k).0.contains(&Verb::Walk)).collect();
+        assert_eq!(walks, [1], "{words:?}");
+        assert_eq!(verbs_at(&words_of("go to the bedroom"), 0).0, [Verb::Walk]);
+    }
+
+    #[test]
+    fn a_pronoun_between_a_verb_and_its_particle_is_what_the_verb_can_be_done_to() {
+        // "Turn it off" after the mug is washed: the faucet (21), not the mug (25). SmolLM2 left
+        // the faucet running, "off" said of the mug.
+        let w = World::demo();
+        let words = Wording::of(&w, &[21, 25], "turn on the faucet, wash the mug, then turn it off");
+        assert!(words.said.contains(&(21, Verb::SwitchOff)) && !words.said.contains(&(25, Verb::SwitchOff)), "{words:?}");
+        // So the faucet's ON is said and undone later: no line; its OFF is the end state.
+        let t = "turn on the faucet, wash the mug, then turn it off";
+        let (c, said) = candidates(&w, &[21, 25], &[], Some(t), &[21, 25], Some(&words));
+        assert!(!c.iter().any(|(l, _)| l == "faucet is ON"), "{c:?}");
+        assert!(said.iter().any(|g| g == &["faucet is OFF"]), "{said:?}");
+    }
+
+    #[test]
+    fn a_thing_put_back_goes_where_it_was_after_what_is_done_with_it() {
+        let w = World::demo();
+        let focus = [33, 34];
+        // No place said: where the book (34) was at the start, on the coffee table (33).
+        let t = "take the book, read it and put it back";
+        let words = Wording::of(&w, &focus, t);
+        assert_eq!(words.relations(), [(34, Relation::On, 33)]);
+        let (c, said) = candidates(&w, &focus, &[], Some(t), &focus, Some(&words));
+        let g = Goals::inferred(&w, c, said, focus.to_vec(), words);
+        let back = "book is ON to coffee_table";
+        assert!(g.lines.iter().any(|l| l == back), "{:?}", g.lines);
+        // It waits while READ, said of the book, is offered.
+        assert!(g.waits_for_a_thing_said_first(back, &w, &g.lines));
+        assert!(!g.waits_for_a_thing_said_first(back, &w, &[back.to_string()]));
+        // A place said after "back" is the place.
+        let words = Wording::of(&w, &[10, 12], "take the apple and put it back in the fridge");
+        assert_eq!(words.relations(), [(12, Relation::Inside, 10)]);
     }
 }
