@@ -711,9 +711,7 @@ impl Wording {
             // (or split round it, "turn it off": the faucet turned on, not the mug washed since)
             let mut verbs = if k > 0 && !after_in { verbs_at(&words, k - 1).0 } else { Vec::new() };
             if k > 0 && !after_in && verbs.is_empty() {
-                let split = |(p, _): &&(&[&str], &[Verb])| p.len() == 2 && PARTICLES.contains(&p[1]) && words[k - 1] == p[0];
-                let around = VERB_PHRASES.iter().filter(split).filter(|(p, _)| words.get(k + 1).is_some_and(|x| x == p[1]));
-                verbs = around.flat_map(|(_, of)| of.iter().copied()).collect();
+                verbs = split_phrase_verbs(&words, k - 1, k + 1);
             }
             // (after a word for putting, which names no verb of the embodiment: a thing a hand
             // can hold; "take the apple from the counter and put it on the plate" is the apple,
@@ -779,12 +777,9 @@ impl Wording {
             let Some(first) = found.iter().position(|(j, _, _)| *j >= end) else { continue };
             let (j, after, _) = &found[first];
             // A phrase whose particle comes after the object ("switch it on", "turn the TV off").
-            for (phrase, of) in VERB_PHRASES.iter().filter(|(p, _)| p.len() == 2 && PARTICLES.contains(&p[1])) {
-                let first = words[k] == phrase[0] || (phrase[0].len() >= 4 && words[k].starts_with(phrase[0]));
-                let split = words.get(*after).is_some_and(|x| x == phrase[1]);
-                if first && split && only(&words[k + 1..*j], &|x| DETERMINERS.contains(&x)) {
-                    verbs.extend(of.iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
-                }
+            if only(&words[k + 1..*j], &|x| DETERMINERS.contains(&x)) {
+                let split = split_phrase_verbs(&words, k, *after);
+                verbs.extend(split.into_iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
             }
             if verbs.is_empty() || !only(&words[end..*j], &|x| DETERMINERS.contains(&x) || PARTICLES.contains(&x)) {
                 continue;
@@ -1308,6 +1303,20 @@ fn verbs_at(words: &[String], k: usize) -> (Vec<Verb>, usize) {
         }
     }
     (verbs, end)
+}
+
+/// The verbs of the two-word phrases whose first word is word `k` (or a longer form of it) and
+/// whose particle is word `at`, after the object: "switch it on", "turned the TV off".
+fn split_phrase_verbs(words: &[String], k: usize, at: usize) -> Vec<Verb> {
+    let mut verbs: Vec<Verb> = Vec::new();
+    for (phrase, of) in VERB_PHRASES.iter().filter(|(p, _)| p.len() == 2 && PARTICLES.contains(&p[1])) {
+        let first = words[k] == phrase[0] || (phrase[0].len() >= 4 && words[k].starts_with(phrase[0]));
+        if first && words.get(at).is_some_and(|x| x == phrase[1]) {
+            let new: Vec<Verb> = of.iter().copied().filter(|v| !verbs.contains(v)).collect();
+            verbs.extend(new);
+        }
+    }
+    verbs
 }
 
 /// Things one "goes to" to use: "go to the toilet", "go to bed" say no walk (EAI's "Go to toilet"
@@ -2822,6 +2831,9 @@ mod tests {
         // the faucet running, "off" said of the mug.
         let w = World::demo();
         let words = Wording::of(&w, &[21, 25], "turn on the faucet, wash the mug, then turn it off");
+        assert!(words.said.contains(&(21, Verb::SwitchOff)) && !words.said.contains(&(25, Verb::SwitchOff)), "{words:?}");
+        // (in the phrase's longer forms too, as with a name between: "turned the TV off")
+        let words = Wording::of(&w, &[21, 25], "I turned on the faucet, washed the mug, then turned it off");
         assert!(words.said.contains(&(21, Verb::SwitchOff)) && !words.said.contains(&(25, Verb::SwitchOff)), "{words:?}");
         // So the faucet's ON is said and undone later: no line; its OFF is the end state.
         let t = "turn on the faucet, wash the mug, then turn it off";
