@@ -193,6 +193,19 @@ fn a_bad_log_filter_is_an_error() {
 }
 
 #[test]
+fn every_zero_is_rejected_by_each_command_that_takes_it() {
+    // `bench nodes` read 0 as 1 and benched every task of the file (all 342 of EAI's).
+    for args in [
+        &["eval", "plan", "--planner", "random", "--tasks-file", &demo_tasks(), "--every", "0"][..],
+        &["bench", "nodes", "--planner", "random", "--tasks-file", &demo_tasks(), "--every", "0"][..],
+    ] {
+        let o = run(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--every 0: give K >= 1"), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
 fn bench_llm_rejects_zero_runs() {
     let o = run(&["bench", "llm", "--runs", "0"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -132,6 +132,10 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
     if let Some(instr) = &a.instruction {
         super::plan::nonempty(instr)?;
     }
+    if a.every == Some(0) {
+        // (read as 1, it benched every task, all 342 of EAI's, where the user asked for a few)
+        anyhow::bail!("--every 0: give K >= 1 (every K-th task)");
+    }
     let path = resolve_model(&a.model)?;
     a.inference.apply();
     let mut engine = Engine::load(&path)?;
@@ -165,7 +169,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let source = a.tasks.source();
         let only = (!a.only.is_empty()).then_some(a.only.as_slice());
         let k = a.every.unwrap_or(if source.tasks_file.is_some() || only.is_some() { 1 } else { 30 });
-        let tasks = plans::every(source.load(only)?, k.max(1));
+        let tasks = plans::every(source.load(only)?, k);
         n_tasks = tasks.len();
         for (i, t) in tasks.iter().enumerate() {
             eprintln!("[{}/{}] {} ({})", i + 1, tasks.len(), t.id, t.title);

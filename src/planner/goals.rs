@@ -584,7 +584,26 @@ pub fn candidates(
         made_by.push((line.clone(), v));
         add_line(w, &mut out, line, Meaning::Fact(f));
     }
-    let (said, met) = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
+    let (mut said, mut met) = wording.map(|words| words.keep_said(w, &made_by, &mut out)).unwrap_or_default();
+    // Where the words say only to walk to a room the robot is in ("go to the kitchen" in the
+    // kitchen), that is what they ask, and it holds: its line is kept as met, so the root has
+    // nothing to do and the user is told (without it no line was left, and SmolLM2 wrote FIND
+    // on the kitchen). Not beside anything else the words say: "walk into the kitchen and …"
+    // says where the rest is done.
+    if said.is_empty() && met.is_empty() {
+        let walked: Vec<u32> = wording
+            .map(|words| words.said.iter().filter(|(_, v)| matches!(v, Verb::Walk | Verb::Run | Verb::Find)).map(|&(id, _)| id).collect())
+            .unwrap_or_default();
+        let only_rooms = !walked.is_empty() && walked.iter().all(|&id| w.node(id).is_some_and(|n| n.is_room()));
+        for &room in walked.iter().filter(|_| only_rooms) {
+            let f = Fact::Edge { from: robot, relation: Relation::Inside, to: room };
+            let line = w.describe(&f);
+            if w.holds(&f) && named.contains(&room) && out.iter().any(|(l, _)| *l == line) && !met.contains(&line) {
+                met.push(line.clone());
+                said.push(vec![line]);
+            }
+        }
+    }
     // A relation that holds at the start (a thing's place, what a hand holds, where the robot
     // is) is no goal: its line would be offered once a step had undone it, to put back what was
     // taken for the task (SmolLM2 put the glass it was to drink from back in the cabinet it took
@@ -2823,6 +2842,18 @@ mod tests {
         let walks: Vec<usize> = (0..words.len()).filter(|&k| verbs_at(&words, k).0.contains(&Verb::Walk)).collect();
         assert_eq!(walks, [1], "{words:?}");
         assert_eq!(verbs_at(&words_of("go to the bedroom"), 0).0, [Verb::Walk]);
+        // A room the robot is in (the kitchen, 1): what is said holds, and it is all the root is
+        // offered (SmolLM2 wrote FIND on the kitchen). Another room is a walk into it.
+        for t in ["go to the kitchen", "walk to the kitchen"] {
+            let (lines, said) = read(&[1], t);
+            assert_eq!((lines.as_slice(), said.as_slice()), (&["character is INSIDE to kitchen".to_string()][..], &[vec!["character is INSIDE to kitchen".to_string()]][..]), "{t}");
+        }
+        let (lines, said) = read(&[2], "go to the living room");
+        assert_eq!(lines, ["character is INSIDE to living_room"]);
+        assert!(said.is_empty(), "{said:?}");
+        // Beside another thing said, the room is where it is done: no line of it.
+        let (lines, _) = read(&[1, 10], "walk to the kitchen and open the fridge");
+        assert!(!lines.iter().any(|l| l.contains("INSIDE to kitchen")), "{lines:?}");
     }
 
     #[test]

@@ -35,6 +35,11 @@ pub trait AttnOps {
     ///
     /// # Safety
     /// As [`AttnOps::weighted_sum`], for each pair; the outputs do not overlap.
+    // Always inlined: called from a function compiled with the CPU's features, the intrinsics of
+    // an implementation's `weighted_sum` then inline too. Left a function of its own (no target
+    // features), each AVX2 fused multiply-add in it became a call: half of prefill's time on a CPU
+    // without AVX-512, whose loops override this one.
+    #[inline(always)]
     unsafe fn weighted_sums(ys: &[*mut f32], ps: &[*const f32], keys: usize, hd: usize, values: &[f32], stride: usize) {
         for (&y, &p) in ys.iter().zip(ps) {
             Self::weighted_sum(std::slice::from_raw_parts_mut(y, hd), std::slice::from_raw_parts(p, keys), values, stride);

@@ -238,17 +238,17 @@ fn attention_loops_simd_equal_portable_bit_for_bit() {
     }
 }
 
-/// The AVX-512 weighted sums, one to five outputs at a time over the same keys, give each output
-/// the portable loop's bits, for head widths with and without a 64- or 16-wide part.
+/// The AVX2 and AVX-512 weighted sums, one to five outputs at a time over the same keys, give
+/// each output the portable loop's bits, for head widths with and without a 64-, 16- or 8-wide part.
 #[test]
 fn batched_weighted_sums_equal_the_portable_loop_bit_for_bit() {
     use super::attn::{AttnOps, Portable};
-    if !avx512::available() {
-        eprintln!("skipped: this CPU has no AVX-512");
+    if !avx2::available() {
+        eprintln!("skipped: this CPU has no AVX2");
         return;
     }
     let mut rng = StdRng::seed_from_u64(31);
-    for hd in [64, 128, 80, 72, 16, 12] {
+    for hd in [64, 128, 80, 72, 40, 16, 12] {
         for keys in [0, 1, 7, 64] {
             let stride = 3 * hd + 8;
             let values = randn(&mut rng, keys.max(1) * stride);
@@ -259,16 +259,24 @@ fn batched_weighted_sums_equal_the_portable_loop_bit_for_bit() {
                 let mut got = start.clone();
                 let yp: Vec<*mut f32> = got.iter_mut().map(|y| y.as_mut_ptr()).collect();
                 let pp: Vec<*const f32> = ps.iter().map(|p| p.as_ptr()).collect();
-                // SAFETY: AVX-512 checked above; each output holds `hd` floats and each
-                // probability row `keys`; values holds `keys` rows of `stride`.
+                // SAFETY: AVX2 checked above, AVX-512 before its call; each output holds `hd`
+                // floats and each probability row `keys`; values holds `keys` rows of `stride`.
                 unsafe {
                     for (y, p) in want.iter_mut().zip(&ps) {
                         Portable::weighted_sum(y, p, &values, stride);
                     }
-                    attn::Avx512::weighted_sums(&yp, &pp, keys, hd, &values, stride);
+                    attn::Avx2::weighted_sums(&yp, &pp, keys, hd, &values, stride);
                 }
                 let same = want.iter().flatten().zip(got.iter().flatten()).all(|(a, b)| a.to_bits() == b.to_bits());
-                assert!(same, "hd {hd}, {keys} keys, {n} outputs");
+                assert!(same, "AVX2: hd {hd}, {keys} keys, {n} outputs");
+                if avx512::available() {
+                    let mut got = start.clone();
+                    let yp: Vec<*mut f32> = got.iter_mut().map(|y| y.as_mut_ptr()).collect();
+                    // SAFETY: as above, AVX-512 checked.
+                    unsafe { attn::Avx512::weighted_sums(&yp, &pp, keys, hd, &values, stride) };
+                    let same = want.iter().flatten().zip(got.iter().flatten()).all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(same, "AVX-512: hd {hd}, {keys} keys, {n} outputs");
+                }
             }
         }
     }
