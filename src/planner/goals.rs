@@ -594,11 +594,11 @@ pub fn candidates(
         let walked: Vec<u32> = wording
             .map(|words| words.said.iter().filter(|(_, v)| matches!(v, Verb::Walk | Verb::Run | Verb::Find)).map(|&(id, _)| id).collect())
             .unwrap_or_default();
-        let only_rooms = !walked.is_empty() && walked.iter().all(|&id| w.node(id).is_some_and(|n| n.is_room()));
-        for &room in walked.iter().filter(|_| only_rooms) {
+        let only_rooms = walked.iter().all(|&id| w.node(id).is_some_and(|n| n.is_room()));
+        for &room in walked.iter().filter(|id| only_rooms && named.contains(id)) {
             let f = Fact::Edge { from: robot, relation: Relation::Inside, to: room };
             let line = w.describe(&f);
-            if w.holds(&f) && named.contains(&room) && out.iter().any(|(l, _)| *l == line) && !met.contains(&line) {
+            if w.holds(&f) && out.iter().any(|(l, _)| *l == line) && !met.contains(&line) {
                 met.push(line.clone());
                 said.push(vec![line]);
             }
