@@ -1999,6 +1999,14 @@ mod tests {
         instruction_objects(w, &w.nodes().map(|n| n.id).collect::<Vec<u32>>(), text)
     }
 
+    /// The candidate lines for `text` over `focus` (all of it named), and the groups of them
+    /// the words say.
+    fn worded_lines(w: &World, focus: &[u32], text: &str) -> (Vec<String>, Vec<Vec<String>>) {
+        let words = Wording::of(w, focus, text);
+        let (lines, said) = candidates(w, focus, &[], Some(text), focus, Some(&words));
+        (lines.into_iter().map(|(l, _)| l).collect(), said)
+    }
+
     /// The demo scene with `edit` made to its graph's JSON.
     #[test]
     fn an_instruction_names_objects_by_their_class_in_words_whole_names_first() {
@@ -2577,11 +2585,7 @@ mod tests {
     #[test]
     fn a_relation_that_holds_at_the_start_is_no_line() {
         let w = World::demo();
-        let lines = |focus: &[u32], t: &str| -> (Vec<String>, Vec<Vec<String>>) {
-            let words = Wording::of(&w, focus, t);
-            let (c, said) = candidates(&w, focus, &[], Some(t), focus, Some(&words));
-            (c.into_iter().map(|(l, _)| l).collect(), said)
-        };
+        let lines = |focus: &[u32], t: &str| worded_lines(&w, focus, t);
         // The apple (12) is on the kitchen counter (11), the plate (17) in the cabinet (16).
         let (take, _) = lines(&[12, 11], "take the apple from the kitchen counter");
         assert!(!take.iter().any(|l| l == "apple is ON to kitchencounter"), "{take:?}");
@@ -2829,11 +2833,7 @@ mod tests {
     #[test]
     fn going_to_a_thing_is_walking_to_it() {
         let w = World::demo();
-        let read = |focus: &[u32], t: &str| {
-            let words = Wording::of(&w, focus, t);
-            let (lines, said) = candidates(&w, focus, &[], Some(t), focus, Some(&words));
-            (lines.into_iter().map(|(l, _)| l).collect::<Vec<_>>(), said)
-        };
+        let read = |focus: &[u32], t: &str| worded_lines(&w, focus, t);
         // "Go to the sofa" is "walk to the sofa": no posture (SmolLM2 lay down on it).
         let (lines, said) = read(&[30], "go to the sofa");
         assert_eq!(said, [["character is CLOSE to sofa"]]);
