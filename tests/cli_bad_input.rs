@@ -334,6 +334,25 @@ fn an_instruction_naming_nothing_the_scene_has_is_an_error_before_the_model_load
 }
 
 #[test]
+fn an_instruction_naming_no_object_and_no_action_is_an_error_before_the_model_loads() {
+    // SmolLM2 closed the door and drank from the mug for words of another language, and looked at
+    // every object in turn for "苹果".
+    for instruction in ["hello", "relax", "asdf qwer", "苹果", "ßüñ 苹果 🍎"] {
+        let o = run(&["plan", instruction, "-m", "/nonexistent.gguf"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{instruction}: {err}");
+        assert!(err.contains("nothing was planned: the instruction names no object of the scene and no action of the robot"), "{instruction}: {err}");
+        assert!(err.contains("the scene's objects: apple, book,") && err.contains("sit") && err.contains("switchon"), "{instruction}: {err}");
+        assert!(!err.contains("model not found"), "{instruction}: {err}");
+    }
+    // An action alone ("sit down"), or a room alone ("go to the kitchen"), is enough to plan.
+    for instruction in ["sit down", "go to the kitchen"] {
+        let o = run(&["plan", instruction, "-m", "/nonexistent.gguf"]);
+        assert!(stderr(&o).contains("model not found") && !stderr(&o).contains("nothing was planned"), "{instruction}: {}", stderr(&o));
+    }
+}
+
+#[test]
 fn a_blank_instruction_is_an_error_before_the_model_loads() {
     for blank in ["", "   "] {
         for args in [&["plan", blank][..], &["bench", "nodes", "--instruction", blank]] {

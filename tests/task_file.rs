@@ -88,6 +88,24 @@ fn bad_goals_and_gold_plans_are_named() {
 }
 
 #[test]
+fn a_gold_program_that_cannot_run_is_refused_unless_the_objects_are_listed() {
+    // It made the object list of the steps before the failing one (the apple alone here, not the
+    // fridge of the goal), silently: the task was then planned without the fridge.
+    let goal = r#"{"from_id": 12, "relation_type": "INSIDE", "to_id": 10}"#;
+    let gold = r#", "gold": ["[GRAB] <apple> (12)", "[WALK] <fridge> (10)"]"#;
+    let e = error_of(&task(&kitchen(), goal, gold));
+    assert!(e.contains("task 't1': gold: the gold program fails at step 1 ([GRAB] <apple> (12))"), "{e}");
+    assert!(e.contains("WALK to <apple> (12) first") && e.contains("\"relevant\""), "{e}");
+    // An explicit list is used as given, and the program is not run for one.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tasks.json");
+    let listed = task(&kitchen(), goal, &format!(r#"{gold}, "relevant": [12, 10]"#));
+    std::fs::write(&path, format!("[{listed}]")).unwrap();
+    let tasks = load(&path).unwrap();
+    assert_eq!(tasks[0].relevant, [10, 12]);
+}
+
+#[test]
 fn a_task_without_goals_is_refused_since_any_plan_would_meet_it() {
     // It once counted as met, so `eval plan` reported 100% task success for any plan.
     let e = error_of(&task(&kitchen(), "", ""));

@@ -12,6 +12,7 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::args::InferenceArgs;
+use crate::action::Verb;
 use crate::eval::task::Task;
 use crate::eval::TaskSource;
 use crate::llm::engine::{Engine, Warm, WarmSource};
@@ -365,6 +366,18 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if args.instruction.is_some() && !unknown.is_empty() && names_no_thing(&world, &req.instruction) {
         bail!("{}", unknown_note(&unknown, &world, true));
     }
+    // One that names no object at all, not even a room, and no action of the robot ("hello",
+    // "relax", words of another language) says nothing the robot could do: planned, SmolLM2 closed
+    // the door and drank from the mug. It is not planned either.
+    if args.instruction.is_some() && unknown.is_empty() && says_nothing_to_do(&world, &req.instruction) {
+        bail!(
+            "nothing was planned: the instruction names no object of the scene and no action of the robot; say what \
+             to do with which object, e.g. step plan \"put the apple in the fridge\" (the scene's objects: {}; the \
+             robot's actions: {})",
+            object_kinds(&world),
+            Verb::ALL.iter().map(|v| v.name().to_lowercase()).collect::<Vec<_>>().join(", ")
+        );
+    }
     if !unknown.is_empty() {
         eprintln!("warning: {}", unknown_note(&unknown, &world, false));
     }
@@ -409,6 +422,18 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
 /// have, so that the user can reword the instruction or give another scene (`alone`: it names
 /// nothing else).
 fn unknown_note(unknown: &[String], world: &World, alone: bool) -> String {
+    let (lead, nothing_else) = if alone { ("nothing was planned: ", ", and it names no other object of the scene") } else { ("", "") };
+    format!(
+        "{lead}the instruction names {}, and no object of the scene is called that{nothing_else}; the planner can \
+         only use the scene's objects ({}): reword the instruction, or give a scene that has it (--scene FILE)",
+        quoted(unknown),
+        object_kinds(world)
+    )
+}
+
+/// The scene's kinds of object (rooms and the robot aside), the first 40 by name and a count of
+/// the rest: what an instruction may name.
+fn object_kinds(world: &World) -> String {
     let kinds: std::collections::BTreeSet<&str> = world
         .nodes()
         .filter(|n| n.id != world.character() && !n.is_room())
@@ -416,13 +441,14 @@ fn unknown_note(unknown: &[String], world: &World, alone: bool) -> String {
         .collect();
     let listed: Vec<&str> = kinds.iter().copied().take(40).collect();
     let more = if kinds.len() > listed.len() { format!(" and {} more", kinds.len() - listed.len()) } else { String::new() };
-    let (lead, nothing_else) = if alone { ("nothing was planned: ", ", and it names no other object of the scene") } else { ("", "") };
-    format!(
-        "{lead}the instruction names {}, and no object of the scene is called that{nothing_else}; the planner can \
-         only use the scene's objects ({}{more}): reword the instruction, or give a scene that has it (--scene FILE)",
-        quoted(unknown),
-        listed.join(", ")
-    )
+    format!("{}{more}", listed.join(", "))
+}
+
+/// Whether `instruction` names no object of `world`, not even a room, and no verb of the robot's.
+fn says_nothing_to_do(world: &World, instruction: &str) -> bool {
+    let all: Vec<u32> = world.nodes().map(|n| n.id).collect();
+    crate::planner::goals::instruction_objects(world, &all, instruction).is_empty()
+        && !Verb::ALL.iter().any(|&v| crate::planner::goals::names_verb(instruction, v))
 }
 
 /// Whether `instruction` names no object of `world` but rooms.

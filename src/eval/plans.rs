@@ -82,6 +82,8 @@ pub struct TaskPlanReport {
     pub relevant_objects: usize,
     /// Why the planner stopped.
     pub stop: String,
+    /// The same without its detail (`StopCause::kind`): what the report's stop counts group by.
+    pub stop_kind: String,
     /// The plan that was scored, one action line each.
     pub plan: Vec<String>,
     pub llm_calls: usize,
@@ -183,6 +185,7 @@ pub fn run_task_stats(model: &mut dyn Generate, task: &Task, cfg: &PlanEvalConfi
         relevant_rule: task.relevance.rule,
         relevant_objects: task.relevant.len(),
         stop: out.stop.to_string(),
+        stop_kind: out.stop.kind(),
         plan: plan.iter().map(|a| a.to_string()).collect(),
         llm_calls: out.stats.llm_calls,
         prompt_tokens: out.stats.prompt_tokens,
@@ -292,8 +295,7 @@ impl PlanEvalReport {
             e.0 += 1;
             e.1 += t.relevant_objects;
             // Stops grouped by kind, without task-specific detail.
-            let kind = t.stop.split(':').next().unwrap_or("").trim().to_string();
-            *stops.entry(kind).or_default() += 1;
+            *stops.entry(t.stop_kind.clone()).or_default() += 1;
         }
         let proto = cfg.protocol();
         PlanEvalReport {

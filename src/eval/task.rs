@@ -148,7 +148,8 @@ pub fn diff_graphs(init: &Graph, fin: &Graph) -> Diff {
 
 /// EAI's rule for a task with a gold program and no stored final graph: run the gold program from the
 /// initial state (an additional step is skipped; any other failure stops the run, and the note says
-/// where), diff the initial and the reached state, and add every object the gold program names.
+/// where: the diff is then of the state reached up to there), diff the initial and the reached
+/// state, and add every object the gold program names.
 pub fn relevant_by_gold_run(world: &World, gold: &Program) -> (Vec<u32>, Relevance) {
     let mut end = world.clone();
     let mut note = None;
@@ -158,7 +159,7 @@ pub fn relevant_by_gold_run(world: &World, gold: &Program) -> (Vec<u32>, Relevan
             Err(f) if f.kind == crate::world::FailureKind::AdditionalStep => {}
             Err(f) => {
                 note =
-                    Some(format!("the gold program fails at step {} ({a}): {}; diffed up to there", i + 1, f.message));
+                    Some(format!("the gold program fails at step {} ({a}): {}", i + 1, f.message));
                 break;
             }
         }
@@ -495,7 +496,18 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
                 ids.dedup();
                 (ids, Relevance { rule: RelevantRule::Explicit, ..Relevance::default() })
             }
-            (None, Some(g), _) => relevant_by_gold_run(&world, g),
+            (None, Some(g), _) => {
+                // A gold program that cannot run gives a list cut short where it stopped, without
+                // the objects its later steps use: the task would be planned on less than it needs.
+                let (ids, rel) = relevant_by_gold_run(&world, g);
+                if let Some(why) = &rel.note {
+                    return Err(task_err(
+                        &t.id,
+                        format!("gold: {why}: fix the program (it makes the task's object list), or list the objects in \"relevant\""),
+                    ));
+                }
+                (ids, rel)
+            }
             (None, None, Some(d)) => {
                 let rel = Relevance {
                     rule: RelevantRule::FinalGraph,

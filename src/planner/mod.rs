@@ -427,6 +427,19 @@ pub enum StopCause {
     Error(String),
 }
 
+impl StopCause {
+    /// The stop without its detail, for counting stops over many runs: `done`, `budget:<which>`,
+    /// `oracle` or `error`.
+    pub fn kind(&self) -> String {
+        match self {
+            StopCause::Done => "done".into(),
+            StopCause::Budget(b) => format!("budget:{b}"),
+            StopCause::Oracle => "oracle".into(),
+            StopCause::Error(_) => "error".into(),
+        }
+    }
+}
+
 impl std::fmt::Display for StopCause {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
