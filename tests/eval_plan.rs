@@ -121,6 +121,12 @@ fn random_planner_is_deterministic_per_seed_and_scored_by_the_scorer() {
     assert!(report.protocol.closed_loop && !report.comparable_with_eai_table);
     let table = report.table();
     assert!(table.contains("closed-loop") && table.contains("grammar errors: 0"), "{table}");
+    // Stops are counted by kind, a budget by its name: `done` was cut at the colon inside its
+    // explanation ("stops: done (the root is complete=3").
+    let stops = table.lines().find(|l| l.starts_with("stops: ")).unwrap();
+    assert!(!stops.contains('('), "{stops}");
+    assert_eq!(report.stops.values().sum::<usize>(), tasks.len(), "{stops}");
+    assert!(report.stops.keys().all(|k| k == "done" || k.starts_with("budget:")), "{stops}");
 }
 
 #[test]
