@@ -88,20 +88,31 @@ fn bad_goals_and_gold_plans_are_named() {
 }
 
 #[test]
-fn a_gold_program_that_cannot_run_is_refused_unless_the_objects_are_listed() {
+fn a_gold_program_that_cannot_run_is_refused_for_planning_and_reported_by_eval_gold() {
     // It made the object list of the steps before the failing one (the apple alone here, not the
-    // fridge of the goal), silently: the task was then planned without the fridge.
+    // fridge of the goal), silently: `step eval plan` then planned the task without the fridge.
     let goal = r#"{"from_id": 12, "relation_type": "INSIDE", "to_id": 10}"#;
     let gold = r#", "gold": ["[GRAB] <apple> (12)", "[WALK] <fridge> (10)"]"#;
-    let e = error_of(&task(&kitchen(), goal, gold));
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, task: String| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("[{task}]")).unwrap();
+        path
+    };
+    let broken = write("broken.json", task(&kitchen(), goal, gold));
+    let source = |path: &Path| TaskSource { tasks_file: Some(path.to_path_buf()), data: None };
+    let e = source(&broken).load_for_planning(None).unwrap_err().to_string();
     assert!(e.contains("task 't1': gold: the gold program fails at step 1 ([GRAB] <apple> (12))"), "{e}");
     assert!(e.contains("WALK to <apple> (12) first") && e.contains("\"relevant\""), "{e}");
-    // An explicit list is used as given, and the program is not run for one.
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("tasks.json");
-    let listed = task(&kitchen(), goal, &format!(r#"{gold}, "relevant": [12, 10]"#));
-    std::fs::write(&path, format!("[{listed}]")).unwrap();
-    let tasks = load(&path).unwrap();
+    let (ok, _, err) = step_cmd(&["eval", "plan", "--planner", "random", "--tasks-file", &broken.display().to_string()]);
+    assert!(!ok && err.contains("fails at step 1"), "{err}");
+    // Scoring the gold programs loads the task and reports the failing step, as before.
+    assert!(load(&broken).is_ok());
+    let (_, out, err) = step_cmd(&["eval", "gold", "--tasks-file", &broken.display().to_string()]);
+    assert!(out.contains("missing_step at step 1"), "{out}{err}");
+    // With the objects listed, the list is used as given, and the program is not run for one.
+    let listed = write("listed.json", task(&kitchen(), goal, &format!(r#"{gold}, "relevant": [12, 10]"#)));
+    let tasks = source(&listed).load_for_planning(None).unwrap();
     assert_eq!(tasks[0].relevant, [10, 12]);
 }
 

@@ -169,7 +169,7 @@ pub fn run(a: &NodesArgs) -> anyhow::Result<()> {
         let source = a.tasks.source();
         let only = (!a.only.is_empty()).then_some(a.only.as_slice());
         let k = a.every.unwrap_or(if source.tasks_file.is_some() || only.is_some() { 1 } else { 30 });
-        let tasks = plans::every(source.load(only)?, k);
+        let tasks = plans::every(source.load_for_planning(only)?, k);
         n_tasks = tasks.len();
         for (i, t) in tasks.iter().enumerate() {
             eprintln!("[{}/{}] {} ({})", i + 1, tasks.len(), t.id, t.title);

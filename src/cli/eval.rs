@@ -159,7 +159,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
     if a.every == 0 {
         anyhow::bail!("--every 0: give K >= 1 (every K-th task)");
     }
-    let tasks = plans::every(source.load(only)?, a.every);
+    let tasks = plans::every(source.load_for_planning(only)?, a.every);
     if tasks.is_empty() {
         anyhow::bail!("no tasks to run");
     }

@@ -140,7 +140,7 @@ fn load_scene(scene: &Value) -> anyhow::Result<(World, Option<Task>)> {
         Some("task") => {
             let id = scene.get("task").and_then(Value::as_str).ok_or_else(|| anyhow!("task record without an id"))?;
             let src = TaskSource { tasks_file: path_of("tasks_file"), data: path_of("data") };
-            let task = src.load(Some(&[id.to_string()]))?.into_iter().next().ok_or_else(|| anyhow!("no task {id}"))?;
+            let task = src.load_for_planning(Some(&[id.to_string()]))?.into_iter().next().ok_or_else(|| anyhow!("no task {id}"))?;
             Ok((task.world.clone(), Some(task)))
         }
         other => bail!("unknown scene record {other:?} in the trace"),

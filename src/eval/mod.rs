@@ -86,4 +86,24 @@ impl TaskSource {
             None => task::load_eai(&EaiData::open(self.data.as_deref())?, only.as_ref()),
         }
     }
+
+    /// [`TaskSource::load`] for a planner: a task whose gold program cannot run is refused, since
+    /// its object list (EAI's rule runs the program) was cut short where it stopped, without the
+    /// objects of its later steps, and the task would be planned on less than it needs. (Scoring
+    /// the gold programs themselves, `step eval gold`, loads them all and reports each failure.)
+    pub fn load_for_planning(&self, only: Option<&[String]>) -> Result<Vec<Task>, EvalError> {
+        let tasks = self.load(only)?;
+        let short = tasks.iter().find(|t| t.relevance.rule == RelevantRule::GoldRun && t.relevance.note.is_some());
+        if let (Some(t), Some(file)) = (short, &self.tasks_file) {
+            return Err(EvalError::Task {
+                file: file.clone(),
+                task: t.id.clone(),
+                message: format!(
+                    "gold: {}: fix the program (it makes the task's object list), or list the objects in \"relevant\"",
+                    t.relevance.note.as_deref().unwrap_or_default()
+                ),
+            });
+        }
+        Ok(tasks)
+    }
 }

@@ -496,18 +496,7 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
                 ids.dedup();
                 (ids, Relevance { rule: RelevantRule::Explicit, ..Relevance::default() })
             }
-            (None, Some(g), _) => {
-                // A gold program that cannot run gives a list cut short where it stopped, without
-                // the objects its later steps use: the task would be planned on less than it needs.
-                let (ids, rel) = relevant_by_gold_run(&world, g);
-                if let Some(why) = &rel.note {
-                    return Err(task_err(
-                        &t.id,
-                        format!("gold: {why}: fix the program (it makes the task's object list), or list the objects in \"relevant\""),
-                    ));
-                }
-                (ids, rel)
-            }
+            (None, Some(g), _) => relevant_by_gold_run(&world, g),
             (None, None, Some(d)) => {
                 let rel = Relevance {
                     rule: RelevantRule::FinalGraph,
