@@ -106,6 +106,13 @@ verbs! {
     WakeUp = "WAKEUP", 0, "wake up";
 }
 
+impl Verb {
+    /// Every verb's name, comma-separated, for an error that says what the robot can do.
+    pub fn listing() -> String {
+        Verb::ALL.iter().map(|v| v.name()).collect::<Vec<_>>().join(", ")
+    }
+}
+
 impl fmt::Display for Verb {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -114,7 +121,7 @@ impl fmt::Display for Verb {
 
 /// A verb name that is not one of [`Verb::ALL`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown action '{0}': the actions are {list}", list = Verb::ALL.iter().map(|v| v.name()).collect::<Vec<_>>().join(", "))]
+#[error("unknown action '{0}': the actions are {list}", list = Verb::listing())]
 pub struct UnknownVerb(pub String);
 
 impl FromStr for Verb {

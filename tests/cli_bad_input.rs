@@ -345,8 +345,9 @@ fn an_instruction_naming_no_object_and_no_action_is_an_error_before_the_model_lo
         assert!(err.contains("the scene's objects: apple, book,") && err.contains("sit") && err.contains("switchon"), "{instruction}: {err}");
         assert!(!err.contains("model not found"), "{instruction}: {err}");
     }
-    // An action alone ("sit down"), or a room alone ("go to the kitchen"), is enough to plan.
-    for instruction in ["sit down", "go to the kitchen"] {
+    // An action alone ("sit down", as a noun: "have a drink", split round "it": "turn it on"),
+    // or a room alone ("go to the kitchen"), is enough to plan.
+    for instruction in ["sit down", "go to the kitchen", "have a drink", "turn it on"] {
         let o = run(&["plan", instruction, "-m", "/nonexistent.gguf"]);
         assert!(stderr(&o).contains("model not found") && !stderr(&o).contains("nothing was planned"), "{instruction}: {}", stderr(&o));
     }

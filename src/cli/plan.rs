@@ -360,22 +360,23 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let (world, task) = load_scene(&scene)?;
     let req = request(args.instruction.as_deref(), args.context.clone(), &world, task.as_ref(), args.oracle_stop)?;
     let unknown = crate::planner::goals::unknown_objects(&world, &req.instruction);
+    let named = named_objects(&world, &req.instruction);
     // An instruction given here whose things are all missing ("look at the clock") is not
     // planned: the model would act on something else (SmolLM2 looked at the apple), and nothing
     // it did would be what was asked. (A task's own text is planned as the benchmark asks.)
-    if args.instruction.is_some() && !unknown.is_empty() && names_no_thing(&world, &req.instruction) {
+    if args.instruction.is_some() && !unknown.is_empty() && names_no_thing(&world, &named) {
         bail!("{}", unknown_note(&unknown, &world, true));
     }
     // One that names no object at all, not even a room, and no action of the robot ("hello",
     // "relax", words of another language) says nothing the robot could do: planned, SmolLM2 closed
     // the door and drank from the mug. It is not planned either.
-    if args.instruction.is_some() && unknown.is_empty() && says_nothing_to_do(&world, &req.instruction) {
+    if args.instruction.is_some() && unknown.is_empty() && says_nothing_to_do(&named, &req.instruction) {
         bail!(
             "nothing was planned: the instruction names no object of the scene and no action of the robot; say what \
              to do with which object, e.g. step plan \"put the apple in the fridge\" (the scene's objects: {}; the \
              robot's actions: {})",
             object_kinds(&world),
-            Verb::ALL.iter().map(|v| v.name().to_lowercase()).collect::<Vec<_>>().join(", ")
+            Verb::listing().to_lowercase()
         );
     }
     if !unknown.is_empty() {
@@ -444,17 +445,20 @@ fn object_kinds(world: &World) -> String {
     format!("{}{more}", listed.join(", "))
 }
 
-/// Whether `instruction` names no object of `world`, not even a room, and no verb of the robot's.
-fn says_nothing_to_do(world: &World, instruction: &str) -> bool {
+/// The objects of `world`, rooms included, that `instruction` names.
+fn named_objects(world: &World, instruction: &str) -> Vec<u32> {
     let all: Vec<u32> = world.nodes().map(|n| n.id).collect();
-    crate::planner::goals::instruction_objects(world, &all, instruction).is_empty()
-        && !Verb::ALL.iter().any(|&v| crate::planner::goals::names_verb(instruction, v))
+    crate::planner::goals::instruction_objects(world, &all, instruction)
 }
 
-/// Whether `instruction` names no object of `world` but rooms.
-fn names_no_thing(world: &World, instruction: &str) -> bool {
-    let all: Vec<u32> = world.nodes().map(|n| n.id).collect();
-    let named = crate::planner::goals::instruction_objects(world, &all, instruction);
+/// Whether an instruction that names the objects `named` (none: not even a room) names no verb
+/// of the robot's either (split round its object too: "turn it on").
+fn says_nothing_to_do(named: &[u32], instruction: &str) -> bool {
+    named.is_empty() && crate::planner::goals::verbs_named(instruction).is_empty()
+}
+
+/// Whether the objects an instruction names, `named`, are rooms only (or none).
+fn names_no_thing(world: &World, named: &[u32]) -> bool {
     named.iter().all(|&id| world.node(id).is_some_and(|n| n.is_room()))
 }
 

@@ -93,14 +93,16 @@ impl TaskSource {
     /// the gold programs themselves, `step eval gold`, loads them all and reports each failure.)
     pub fn load_for_planning(&self, only: Option<&[String]>) -> Result<Vec<Task>, EvalError> {
         let tasks = self.load(only)?;
-        let short = tasks.iter().find(|t| t.relevance.rule == RelevantRule::GoldRun && t.relevance.note.is_some());
-        if let (Some(t), Some(file)) = (short, &self.tasks_file) {
+        let short = tasks
+            .iter()
+            .filter(|t| t.relevance.rule == RelevantRule::GoldRun)
+            .find_map(|t| t.relevance.note.as_deref().map(|note| (t, note)));
+        if let (Some((t, note)), Some(file)) = (short, &self.tasks_file) {
             return Err(EvalError::Task {
                 file: file.clone(),
                 task: t.id.clone(),
                 message: format!(
-                    "gold: {}: fix the program (it makes the task's object list), or list the objects in \"relevant\"",
-                    t.relevance.note.as_deref().unwrap_or_default()
+                    "gold: {note}: fix the program (it makes the task's object list), or list the objects in \"relevant\""
                 ),
             });
         }

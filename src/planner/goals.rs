@@ -352,6 +352,83 @@ pub fn menu_text(lines: &[String]) -> String {
     s
 }
 
+/// The most objects an instruction that names none is taken to be about, from what its verbs
+/// ask of their object ([`afforded_objects`]): past it ("open something" in a house of
+/// cupboards) the verb narrows nothing, and the root proposes freely as before.
+pub const MAX_AFFORDED_OBJECTS: usize = 8;
+
+/// For an instruction that names a verb but no object ("have a drink", "sit down"): the objects
+/// of `focus` (rooms and the robot aside) that the typed grammar admits as the first object of a
+/// verb it names, and those verbs. Only verbs that ask something of their object count (DRINK a
+/// drinkable thing; not WALK or TOUCH, which take any); none where the objects are more than
+/// [`MAX_AFFORDED_OBJECTS`]. Read once, at the start, as a person would ("something to drink").
+pub fn afforded_objects(w: &World, focus: &[u32], instruction: &str) -> (Vec<u32>, Vec<Verb>) {
+    let verbs: Vec<Verb> = verbs_named(instruction)
+        .into_iter()
+        .filter(|&v| v.arity() >= 1 && !crate::world::affordance::SlotRequirement::of(v, 0).is_any())
+        .collect();
+    let robot = w.character();
+    let objects: Vec<u32> = focus
+        .iter()
+        .copied()
+        .filter(|&id| id != robot && w.node(id).is_some_and(|n| !n.is_room()))
+        .filter(|&id| verbs.iter().any(|&v| slot_admits(w, v, 0, id)))
+        .collect();
+    if objects.is_empty() || objects.len() > MAX_AFFORDED_OBJECTS {
+        return (Vec::new(), Vec::new());
+    }
+    (objects, verbs)
+}
+
+/// Of the candidate lines for an instruction that names `verbs` but no object (see
+/// [`afforded_objects`]), those a verb of them brings about with one of `objects` as its first
+/// object, and the lines of those verbs themselves: "sit down" asks for the robot sitting, not
+/// for the chair in hand on the sofa, which SmolLM2 chose when offered every line of the seats.
+/// A line the verbs bring about that the candidates left out is added after them: "switch
+/// something off" asks for a thing OFF, a line offered otherwise only where the words name
+/// SWITCHOFF by a word (SmolLM2, offered the whole list, switched the remote control on). All
+/// the candidates stay where the verbs bring nothing about. The groups the words say keep only
+/// lines still offered.
+pub fn made_by_verbs(
+    w: &World,
+    objects: &[u32],
+    verbs: &[Verb],
+    candidates: Vec<(String, Meaning)>,
+    said: Vec<Vec<String>>,
+) -> (Vec<(String, Meaning)>, Vec<Vec<String>>) {
+    let mut made: Vec<(String, Meaning)> = Vec::new();
+    for a in typed_actions(w, objects).into_iter().filter(|a| verbs.contains(&a.verb) && objects.contains(&a.args[0].id)) {
+        let Some((_, before)) = w.way_to(&a) else { continue };
+        let Some(after) = trial(&before, &a) else { continue };
+        for f in gained(&before, &after, &a) {
+            // (what the robot is close to, or holds in its hands, is the way there, not the ask)
+            if matches!(f, Fact::Holds { .. } | Fact::Edge { relation: Relation::Close, .. }) {
+                continue;
+            }
+            let line = w.describe(&f);
+            if !made.iter().any(|(l, _)| *l == line) {
+                made.push((line, Meaning::Fact(f)));
+            }
+        }
+    }
+    let asked = |(l, m): &(String, Meaning)| match m {
+        Meaning::Verb(v) => verbs.contains(v),
+        Meaning::Fact(_) => made.iter().any(|(ml, _)| ml == l),
+    };
+    if made.is_empty() && !candidates.iter().any(asked) {
+        return (candidates, said);
+    }
+    let mut kept: Vec<(String, Meaning)> = candidates.into_iter().filter(asked).collect();
+    for (l, m) in made {
+        if !kept.iter().any(|(k, _)| *k == l) {
+            kept.push((l, m));
+        }
+    }
+    let offered = |l: &String| kept.iter().any(|(k, _)| k == l);
+    let said = said.into_iter().map(|g| g.into_iter().filter(offered).collect::<Vec<_>>()).filter(|g| !g.is_empty()).collect();
+    (kept, said)
+}
+
 /// The most objects whose candidate lines are enumerated: past it (an instruction that names
 /// nothing in a whole house) the lines would be thousands and nothing tells them apart.
 pub const MAX_GOAL_OBJECTS: usize = 40;
@@ -1308,6 +1385,23 @@ pub fn names_verb(text: &str, v: Verb) -> bool {
     (0..words.len()).any(|k| verbs_at(&words, k).0.contains(&v))
 }
 
+/// Every verb of the robot's `text` names: by a word or a phrase ([`names_verb`]), or by a
+/// phrase split round a short object ("turn it on", "switch the light off").
+pub fn verbs_named(text: &str) -> Vec<Verb> {
+    let words = words_of(text);
+    let mut out: Vec<Verb> = Vec::new();
+    for k in 0..words.len() {
+        let split = (k + 2..words.len().min(k + 5)).flat_map(|at| split_phrase_verbs(&words, k, at));
+        for v in verbs_at(&words, k).0.into_iter().chain(split) {
+            if !out.contains(&v) {
+                out.push(v);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
 /// The verbs the word at `k` names, or a phrase beginning there ([`VERB_PHRASES`]), and the index
 /// of the word after the longest such phrase (after the word, where none).
 fn verbs_at(words: &[String], k: usize) -> (Vec<Verb>, usize) {
@@ -1354,6 +1448,17 @@ fn says_a_verb(word: &str) -> bool {
 }
 
 /// Whether one lower-case `word` names `v` ([`names_verb`]).
+/// Whether `word` (or its plural) is an action of the robot's said as a noun: "have a drink",
+/// "take a walk", "have a look at the apple" name what to do, not a thing the scene lacks. Whole
+/// words only ("cutlets" is not CUT), the name or its stem as [`word_names_verb`] cuts it.
+fn is_action_noun(word: &str) -> bool {
+    let forms = word_forms(word);
+    Verb::ALL.iter().any(|&v| {
+        let name = v.name().to_lowercase();
+        forms.iter().any(|f| *f == name || (f.len() >= 3 && word_names_verb(f, v) && name.starts_with(f.as_str())))
+    })
+}
+
 fn word_names_verb(word: &str, v: Verb) -> bool {
     let name = v.name().to_lowercase();
     let stem = name.split('_').next().unwrap_or(&name);
@@ -1954,6 +2059,7 @@ pub fn unknown_objects(w: &World, instruction: &str) -> Vec<String> {
             || KINDS.iter().any(|(kind, members)| {
                 stem.iter().any(|s| s == kind) && members.iter().any(|m| categories.contains(*m) || classes.iter().any(|c| c.contains(m)))
             })
+            || is_action_noun(word)
     };
     let lower = instruction.to_lowercase();
     let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
@@ -2226,6 +2332,47 @@ mod tests {
     }
 
     #[test]
+    fn an_instruction_naming_no_object_is_about_the_few_objects_its_verbs_afford() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let afforded = |t: &str| afforded_objects(&w, &all, t);
+        assert_eq!(afforded("sit down"), (vec![19, 30], vec![Verb::Sit]));
+        assert_eq!(afforded("lie down"), (vec![30], vec![Verb::Lie]));
+        assert_eq!(afforded("eat something"), (vec![11, 12, 14], vec![Verb::Eat]));
+        // Said as a noun, or split round "it".
+        assert_eq!(afforded("have a drink").1, [Verb::Drink]);
+        assert!(afforded("have a drink").0.contains(&25));
+        assert_eq!(afforded("turn it on").1, [Verb::SwitchOn]);
+        // A verb that takes any object, or one that many objects afford, narrows nothing.
+        assert_eq!(afforded("touch something"), (vec![], vec![]));
+        assert_eq!(afforded("grab something"), (vec![], vec![]));
+        // The lines kept are those the verb brings about.
+        let (c, said) = candidates(&w, &all, &[], Some("sit down"), &[19, 30], Some(&Wording::of(&w, &all, "sit down")));
+        assert!(c.iter().any(|(l, _)| l.contains("HOLDS")), "{c:?}");
+        let (kept, said) = made_by_verbs(&w, &[19, 30], &[Verb::Sit], c, said);
+        let lines: Vec<&str> = kept.iter().map(|(l, _)| l.as_str()).collect();
+        assert_eq!(lines, ["character is SITTING", "character is ON to chair", "character is ON to sofa"]);
+        assert_eq!(said, [vec!["character is SITTING".to_string()]]);
+        // A line the candidates leave out (OFF, named only by a split phrase) is what is asked.
+        let t = "switch something off";
+        let (objects, verbs) = afforded(t);
+        assert_eq!(verbs, [Verb::SwitchOff]);
+        let (c, said) = candidates(&w, &all, &[], Some(t), &objects, Some(&Wording::of(&w, &all, t)));
+        assert!(!c.iter().any(|(l, _)| l.ends_with(" is OFF")), "{c:?}");
+        let (kept, _) = made_by_verbs(&w, &objects, &verbs, c, said);
+        let lines: Vec<&str> = kept.iter().map(|(l, _)| l.as_str()).collect();
+        assert!(lines.contains(&"light is OFF") && lines.iter().all(|l| l.ends_with(" is OFF")), "{lines:?}");
+    }
+
+    #[test]
+    fn verbs_are_named_by_a_word_a_phrase_or_a_phrase_split_round_its_object() {
+        assert_eq!(verbs_named("turn it on"), [Verb::SwitchOn]);
+        assert_eq!(verbs_named("switch the light off"), [Verb::SwitchOff]);
+        assert_eq!(verbs_named("have a drink"), [Verb::Drink]);
+        assert!(verbs_named("hello there").is_empty());
+    }
+
+    #[test]
     fn phrases_that_name_no_object_of_the_scene_are_found() {
         let w = World::demo();
         assert_eq!(unknown_objects(&w, "put the unicorn in the fridge"), vec!["unicorn"]);
@@ -2235,6 +2382,11 @@ mod tests {
         assert!(unknown_objects(&w, "relax in the lounge").is_empty());
         assert_eq!(unknown_objects(&w, "Put the red apples into my fridge."), Vec::<String>::new());
         assert_eq!(unknown_objects(&w, "give the dragon and a golden harp to the apple"), vec!["dragon", "golden harp"]);
+        // An action of the robot's said as a noun is what to do, not a missing thing; a longer
+        // word that begins with one is still a thing.
+        assert!(unknown_objects(&w, "have a drink").is_empty());
+        assert!(unknown_objects(&w, "take a walk to the kitchen and have a look at the apple").is_empty());
+        assert_eq!(unknown_objects(&w, "put the cutlets in the fridge"), vec!["cutlets"]);
         // No article, nothing looked at; an article with nothing after it, nothing either.
         assert!(unknown_objects(&w, "watch unicorns").is_empty());
         assert!(unknown_objects(&w, "put it in the").is_empty());

@@ -151,6 +151,9 @@ pub(crate) struct Run<'a> {
     /// Over a whole scene, where every verb the instruction says takes no object ("stand up",
     /// "get up from the chair"), those verbs: the root's only steps (see `Run::menu`).
     pub(super) bare_verbs: Vec<Verb>,
+    /// Over a whole scene, where the instruction names no object but verbs that ask something of
+    /// theirs ("have a drink"), those verbs; `root_objects` are then the objects that afford them.
+    pub(super) afforded_by: Vec<Verb>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -171,13 +174,23 @@ pub(crate) fn run_tree(
     });
     // Over a whole scene, the objects the instruction names (and what holds them) lead the view,
     // which the budget would otherwise fill with the first objects by id.
-    let (mut root_objects, mut root_view, mut read_as) = (Vec::new(), Vec::new(), None);
+    let (mut root_objects, mut root_view, mut read_as, mut afforded) = (Vec::new(), Vec::new(), None, Vec::new());
     if let Some(w) = env.world().filter(|_| focus_is_scene) {
         root_objects = goals::instruction_objects(w, &focus, &req.instruction);
+        // One that names what to do but no object ("have a drink") is about the few things that
+        // afford it: SmolLM2, free to choose over the whole scene, sat on the chair.
+        if root_objects.is_empty() {
+            (root_objects, afforded) = goals::afforded_objects(w, &focus, &req.instruction);
+        }
         if cfg.subgoal_focus && !root_objects.is_empty() {
             root_view = with_holders(w, &root_objects, &focus);
             let labels = |ids: &[u32]| -> Vec<String> { ids.iter().filter_map(|&id| w.node(id).map(|n| n.label())).collect() };
-            read_as = Some(json!({"named": labels(&root_objects), "holding_them": labels(&root_view[root_objects.len()..])}));
+            let key = if afforded.is_empty() { "named" } else { "afforded" };
+            let mut read = json!({key: labels(&root_objects), "holding_them": labels(&root_view[root_objects.len()..])});
+            if !afforded.is_empty() {
+                read["by_verbs"] = json!(afforded.iter().map(|v| v.name()).collect::<Vec<_>>());
+            }
+            read_as = Some(read);
         }
     }
     // (SmolLM2 walked to a chair and sat for "stand up" said of a robot standing, and took the
@@ -189,6 +202,7 @@ pub(crate) fn run_tree(
         states: StateLog::new(&start_state),
         bare_verbs,
         root_objects,
+        afforded_by: afforded,
         root_view,
         focus_is_scene,
         last_change: Vec::new(),
@@ -277,10 +291,17 @@ impl Run<'_> {
             return;
         }
         let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
-        let about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
+        let mut about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
+        // (one that names no object but what to do is about the objects that afford it, `run_tree`)
+        if self.cfg.named_lines && about.is_empty() && self.focus_is_scene {
+            about = self.root_objects.clone();
+        }
         let wording = if self.cfg.said_lines { Wording::of(w, &focus, &instruction) } else { Wording::default() };
         let said = self.cfg.said_lines.then_some(&wording);
-        let (candidates, said) = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
+        let (mut candidates, mut said) = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
+        if !self.afforded_by.is_empty() && about == self.root_objects {
+            (candidates, said) = goals::made_by_verbs(w, &about, &self.afforded_by, candidates, said);
+        }
         if candidates.is_empty() {
             return;
         }

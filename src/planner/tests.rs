@@ -1549,6 +1549,42 @@ fn infer_on(m: &mut Scripted, world: World, instruction: &str) -> (PlanOutcome, 
 }
 
 #[test]
+fn an_instruction_naming_what_to_do_but_no_object_is_about_the_things_that_afford_it() {
+    // SmolLM2, offered nothing (the root free over the whole scene), sat on the chair for "have a
+    // drink"; offered every line of the seats for "sit down", it put the chair on the sofa first.
+    for (instruction, preferred, done_by) in [
+        ("have a drink", "subgoal: DRINK", "[DRINK] <mug> (25)"),
+        ("sit down", "subgoal: character is SITTING", "[SIT] <chair> (19)"),
+    ] {
+        // (the step under the line is the verb's own action: the way to it is walked first)
+        let act = format!("action: {done_by}");
+        let mut m = Scripted::new(&[&act, "done", "done", "done"]);
+        m.prefer = Some(preferred.to_string());
+        if instruction == "sit down" {
+            // (three lines: the root chooses, and then chooses to be done)
+            m.preferences = [preferred, "done"].iter().map(|s| s.to_string()).collect();
+        }
+        let (out, _) = infer_on_demo(&mut m, instruction);
+        // The root's first subgoal is the verb's line (the only one offered for DRINK:
+        // no scoring), and the lines scored are only what the verb brings about: no thing in
+        // hand, nothing put anywhere.
+        assert_eq!(out.tree.node(1).text, preferred.trim_start_matches("subgoal: "), "{instruction}: {:?}", out.tree.to_json());
+        let offered = m.scored.first().cloned().unwrap_or_default();
+        assert!(!offered.iter().any(|l| l.contains("HOLDS") || l.starts_with("subgoal: chair")), "{instruction}: {offered:?}");
+        if instruction == "sit down" {
+            assert!(offered.len() == 3 && offered.contains(&preferred.to_string()), "{offered:?}");
+        }
+        assert_eq!(out.stop, StopCause::Done, "{instruction}: {:?}", plan_lines(&out));
+        assert!(plan_lines(&out).iter().any(|l| l == done_by), "{instruction}: {:?}", plan_lines(&out));
+    }
+    // A verb any object affords (TOUCH) narrows nothing: the root proposes over the scene, unscored.
+    let mut m = Scripted::new(&["action: [WALK] <apple> (12)", "done", "done"]);
+    let (out, _) = infer_on_demo(&mut m, "touch something");
+    assert!(m.scored.iter().all(|c| !c.iter().any(|l| l.starts_with("subgoal: "))), "{:?}", m.scored);
+    assert_eq!(plan_lines(&out), ["[WALK] <apple> (12)"]);
+}
+
+#[test]
 fn a_word_for_heating_switches_on_the_appliance_it_is_done_in() {
     // "Heat" is no verb of the embodiment: the words say the milk goes in the microwave and the
     // microwave is switched on, so a model that would stop once the milk is in goes on to that.
