@@ -1447,7 +1447,6 @@ fn says_a_verb(word: &str) -> bool {
     Verb::ALL.iter().any(|&v| word_names_verb(word, v)) || VERB_PHRASES.iter().any(|(p, _)| p[0] == word)
 }
 
-/// Whether one lower-case `word` names `v` ([`names_verb`]).
 /// Whether `word` (or its plural) is an action of the robot's said as a noun: "have a drink",
 /// "take a walk", "have a look at the apple" name what to do, not a thing the scene lacks. Whole
 /// words only ("cutlets" is not CUT), the name or its stem as [`word_names_verb`] cuts it.
@@ -1459,6 +1458,7 @@ fn is_action_noun(word: &str) -> bool {
     })
 }
 
+/// Whether one lower-case `word` names `v` ([`names_verb`]).
 fn word_names_verb(word: &str, v: Verb) -> bool {
     let name = v.name().to_lowercase();
     let stem = name.split('_').next().unwrap_or(&name);

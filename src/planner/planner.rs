@@ -291,15 +291,18 @@ impl Run<'_> {
             return;
         }
         let named = (!self.cfg.all_verb_lines).then_some(instruction.as_str());
-        let mut about = if self.cfg.named_lines { goals::instruction_objects(w, &focus, &instruction) } else { Vec::new() };
-        // (one that names no object but what to do is about the objects that afford it, `run_tree`)
-        if self.cfg.named_lines && about.is_empty() && self.focus_is_scene {
-            about = self.root_objects.clone();
-        }
+        // (one that names no object but what to do is about the objects that afford it, `run_tree`,
+        // and asks only what it does to them)
+        let afforded = self.cfg.named_lines && !self.afforded_by.is_empty();
+        let about = match (self.cfg.named_lines, afforded) {
+            (true, true) => self.root_objects.clone(),
+            (true, false) => goals::instruction_objects(w, &focus, &instruction),
+            (false, _) => Vec::new(),
+        };
         let wording = if self.cfg.said_lines { Wording::of(w, &focus, &instruction) } else { Wording::default() };
         let said = self.cfg.said_lines.then_some(&wording);
         let (mut candidates, mut said) = goals::candidates(w, &focus, &self.cfg.excluded_verbs, named, &about, said);
-        if !self.afforded_by.is_empty() && about == self.root_objects {
+        if afforded {
             (candidates, said) = goals::made_by_verbs(w, &about, &self.afforded_by, candidates, said);
         }
         if candidates.is_empty() {
