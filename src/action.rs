@@ -16,9 +16,28 @@ pub struct ObjRef {
     pub id: u32,
 }
 
+/// The longest class name an action may name (a grammar spells every name out).
+pub const MAX_CLASS_CHARS: usize = 64;
+
 impl ObjRef {
     pub fn new(class_name: impl Into<String>, id: u32) -> Self {
         Self { class_name: class_name.into(), id }
+    }
+
+    /// Why `name` cannot be an object's class in an action line (`<name> (id)`), if it cannot:
+    /// empty, too long, or holding `<`, `>` or a control character, any of which would make the
+    /// line ambiguous. The scene loader and the grammar builder both ask this, so a scene that
+    /// loads can always be planned on.
+    pub fn class_name_problem(name: &str) -> Option<String> {
+        if name.is_empty() {
+            return Some("it is empty".into());
+        }
+        if name.chars().count() > MAX_CLASS_CHARS {
+            return Some(format!("it is longer than {MAX_CLASS_CHARS} characters"));
+        }
+        name.chars()
+            .find(|&c| c.is_control() || c == '<' || c == '>')
+            .map(|c| format!("it contains {c:?}, which would make the line ambiguous"))
     }
 }
 

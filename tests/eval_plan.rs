@@ -220,6 +220,30 @@ fn the_cli_runs_the_random_planner_on_the_demo_file_as_json() {
     assert_eq!(v["excluded_verbs"], serde_json::json!(["SLEEP", "WAKEUP", "LOOKAT_SHORT", "LOOKAT_LONG", "RELEASE"]));
     assert!(export.is_file());
     assert!(traces.join("apple_in_fridge.jsonl").is_file());
+    // `step sim run` takes each task's plan out of the export and judges it as the report did.
+    for t in v["tasks"].as_array().unwrap() {
+        let id = t["id"].as_str().unwrap();
+        let sim = Command::new(env!("CARGO_BIN_EXE_step"))
+            .args(["sim", "run", "--json", "--task", id, "--tasks-file"])
+            .arg(repo().join("tests/data/demo_tasks.json"))
+            .arg("--plan")
+            .arg(&export)
+            .output()
+            .unwrap();
+        let s: serde_json::Value = serde_json::from_slice(&sim.stdout)
+            .unwrap_or_else(|e| panic!("{id}: {e}: {}", String::from_utf8_lossy(&sim.stderr)));
+        assert_eq!(s["success"], t["success"], "{id}");
+        assert_eq!(s["steps"].as_array().unwrap().len(), t["plan"].as_array().unwrap().len(), "{id}");
+    }
+    let other = Command::new(env!("CARGO_BIN_EXE_step"))
+        .args(["sim", "run", "--task", "held_0_0", "--tasks-file"])
+        .arg(repo().join("tests/data/heldout/dev.json"))
+        .arg("--plan")
+        .arg(&export)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert!(!other.status.success() && err.contains("none for task 'held_0_0' (it has: apple_in_fridge, heat_milk, watch_tv)"), "{err}");
     let bad = Command::new(env!("CARGO_BIN_EXE_step"))
         .args(["eval", "plan", "--planner", "random", "--protocol", "everything", "--tasks-file"])
         .arg(repo().join("tests/data/demo_tasks.json"))

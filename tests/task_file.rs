@@ -129,6 +129,28 @@ fn a_task_without_goals_is_refused_since_any_plan_would_meet_it() {
 }
 
 #[test]
+fn a_task_no_plan_could_meet_or_plan_from_is_refused() {
+    // Each once loaded: the goal below was failed by every plan, the empty list let the planner
+    // name any object while the report said "0.0 objects each", the blank title planned from ".".
+    let fridge = |state: &str| format!(r#"{{"id": 10, "class_name": "fridge", "state": "{state}"}}"#);
+    let e = error_of(&task(&kitchen(), &format!("{}, {}", fridge("OPEN"), fridge("CLOSED")), ""));
+    assert!(e.contains("task 't1'") && e.contains("<fridge> (10) to be both OPEN and CLOSED"), "{e}");
+    let e = error_of(&task(&kitchen(), &fridge("OPEN"), r#", "relevant": []"#));
+    assert!(e.contains("task 't1'") && e.contains("relevant is an empty list"), "{e}");
+    let e = error_of(&task(&kitchen(), &fridge("OPEN"), "").replace(r#""title": "T""#, r#""title": " ""#));
+    assert!(e.contains("task 't1'") && e.contains("title is empty"), "{e}");
+    // A scene no plan could stand on is refused with the node and the fix.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.json");
+    let mut graph: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(kitchen()).unwrap()).unwrap();
+    let fridge_node = graph["nodes"].as_array_mut().unwrap().iter_mut().find(|n| n["id"] == 10).unwrap();
+    fridge_node["states"].as_array_mut().unwrap().push("OPEN".into());
+    std::fs::write(&scene, graph.to_string()).unwrap();
+    let e = error_of(&task(&scene.display().to_string(), &fridge("OPEN"), ""));
+    assert!(e.contains("states OPEN and CLOSED both given"), "{e}");
+}
+
+#[test]
 fn bad_files_and_scenes_say_what_is_wrong() {
     let e = error_of(&task("no_such_scene.json", "", ""));
     assert!(e.contains("neither a graph file") && e.contains("no_such_scene.json"), "{e}");

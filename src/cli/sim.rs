@@ -12,7 +12,7 @@ use serde_json::json;
 use super::args::{parse_plan_format, read_input, TaskArgs};
 use super::EXIT_TASK_FAILED;
 use crate::eval::{run_plan, StepResult};
-use crate::program::{PlanFormat, Program};
+use crate::program::{exported_plan, PlanFormat, Program};
 
 #[derive(Args, Debug)]
 pub struct SimArgs {
@@ -35,7 +35,7 @@ pub struct RunArgs {
     /// The task id (e.g. 27_2 for EAI's tasks, or an id from --tasks-file).
     #[arg(long)]
     pub task: String,
-    /// The plan file (`-` for standard input).
+    /// The plan file (`-` for standard input); from a file of `step eval plan --export-eai` plans, the task's own.
     #[arg(long, value_name = "FILE")]
     pub plan: PathBuf,
     /// The plan's format: lines, json or eai; guessed from the text when absent.
@@ -56,7 +56,16 @@ pub fn run(args: SimArgs) -> anyhow::Result<ExitCode> {
 
 fn run_one(a: RunArgs) -> anyhow::Result<ExitCode> {
     let text = read_input(&a.plan, "plan file")?;
-    let format = a.format.unwrap_or_else(|| PlanFormat::detect(&text));
+    // A file of exported plans (`step eval plan --export-eai`) holds one plan per task: the task's own runs.
+    let exported = if matches!(a.format, None | Some(PlanFormat::Eai)) { exported_plan(&text, &a.task) } else { None };
+    let (text, format) = match exported {
+        Some(Ok(plan)) => (plan, PlanFormat::Eai),
+        Some(Err(why)) => bail!("{}: {why}", a.plan.display()),
+        None => {
+            let format = a.format.unwrap_or_else(|| PlanFormat::detect(&text));
+            (text, format)
+        }
+    };
     let program =
         Program::parse(&text, format).with_context(|| format!("cannot read the plan in {}", a.plan.display()))?;
     let tasks = a.tasks.source().load(Some(std::slice::from_ref(&a.task)))?;

@@ -240,7 +240,7 @@ mod tests {
         Node::new(id, class, category, &[], states)
     }
 
-    /// A kitchen (1), the robot (2) in it, a fridge (3, closed, plugged in), an apple (4) inside it.
+    /// A kitchen (1), the robot (2) and a fridge (3, closed, plugged in) in it, an apple (4) inside the fridge.
     fn world() -> World {
         let g = Graph {
             nodes: vec![
@@ -251,6 +251,7 @@ mod tests {
             ],
             edges: vec![
                 Edge { from_id: 2, relation_type: "INSIDE".into(), to_id: 1 },
+                Edge { from_id: 3, relation_type: "INSIDE".into(), to_id: 1 },
                 Edge { from_id: 4, relation_type: "INSIDE".into(), to_id: 3 },
             ],
         };

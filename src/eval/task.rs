@@ -25,7 +25,7 @@ use super::dataset::{task_id_key, EaiData};
 use super::goal::{Goal, RawGoal};
 use super::EvalError;
 use crate::program::{parse_step_line, Location, PlanParseError, Program};
-use crate::world::{read_scene, Graph, Node, World};
+use crate::world::{read_scene, Graph, Node, State, World};
 
 /// Where a task came from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -470,6 +470,9 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
                 None => return Err(task_err(&t.id, format!("scene '{}' could not be loaded", t.scene))),
             },
         };
+        if t.title.trim().is_empty() {
+            return Err(task_err(&t.id, "title is empty: give the task a title (the instruction a planner reads)".into()));
+        }
         let goal = t.vh_goal.to_goal().map_err(|m| task_err(&t.id, format!("vh_goal: {m}")))?;
         check_goal_objects(&world, &goal, &t.scene).map_err(|m| task_err(&t.id, m))?;
         let gold = match &t.gold {
@@ -482,6 +485,16 @@ pub fn load_file(path: &Path, data: Option<&Path>) -> Result<Vec<Task>, EvalErro
         };
         let (relevant, relevance) = match (&t.relevant, &gold, diff_relevant) {
             (Some(ids), _, _) => {
+                // An empty list would leave the planner nothing to name (and the scorer's
+                // hallucination check nothing to pass): a mistake, not a task.
+                if ids.is_empty() {
+                    return Err(task_err(
+                        &t.id,
+                        "relevant is an empty list: list the ids of the objects the task involves, or leave the \
+                         field out (the gold program's run, or the goal's objects, then give them)"
+                            .into(),
+                    ));
+                }
                 if let Some(bad) = ids.iter().find(|&&id| world.node(id).is_none()) {
                     return Err(task_err(
                         &t.id,
@@ -561,6 +574,18 @@ fn check_object(world: &World, id: u32, class_name: &str, scene: &str, what: &st
 fn check_goal_objects(world: &World, goal: &Goal, scene: &str) -> Result<(), String> {
     for n in &goal.nodes {
         check_object(world, n.id, &n.class_name, scene, "a node goal")?;
+    }
+    // Two states no object can be in at once: no plan could meet the goal.
+    for n in &goal.nodes {
+        if let Some(o) = n.state.opposite().filter(|&o| goal.nodes.iter().any(|m| m.id == n.id && m.state == o)) {
+            return Err(format!(
+                "vh_goal asks <{}> ({}) to be both {} and {}, which no object can be at once: keep one",
+                n.class_name,
+                n.id,
+                n.state.name(),
+                o.name()
+            ));
+        }
     }
     for e in &goal.edges {
         for id in [e.from_id, e.to_id] {

@@ -183,6 +183,14 @@ pub(super) fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> 
     Ok(())
 }
 
+/// An object's class, by the rule the scene loader applies too ([`ObjRef::class_name_problem`]).
+pub(super) fn check_class(name: &str) -> Result<(), GrammarError> {
+    match ObjRef::class_name_problem(name) {
+        Some(reason) => Err(GrammarError::BadName { kind: "object class", name: name.to_string(), reason }),
+        None => Ok(()),
+    }
+}
+
 fn check_label(label: &str) -> Result<(), GrammarError> {
     check_name("label", label, &[])?;
     if let Some(c) = label.chars().find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | ' '))) {
@@ -268,7 +276,7 @@ impl ActionGrammar {
         let mut objects: Vec<&ObjRef> = Vec::new();
         let mut seen = BTreeSet::new();
         for o in &self.objects {
-            check_name("object class", &o.class_name, &['<', '>'])?;
+            check_class(&o.class_name)?;
             if seen.insert(o) {
                 objects.push(o);
             }

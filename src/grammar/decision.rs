@@ -20,7 +20,7 @@ use std::str::FromStr;
 
 use crate::action::{parse_action_line, Action, LineSyntax, ObjRef, Verb};
 
-use super::actions::{check_name, is_text_char, GrammarError, ParseError, VerbSpec, TEXT_CLASS_REGEX};
+use super::actions::{check_class, check_name, is_text_char, GrammarError, ParseError, VerbSpec, TEXT_CLASS_REGEX};
 use super::lark::lark_string;
 use super::{MAX_LINES, MAX_TEXT_CHARS, TEXT_CHARS};
 
@@ -155,7 +155,7 @@ impl ActionSet {
     /// The admitted actions, one list per verb in the order of the spec: validates names and
     /// arities, drops verbs that admit nothing.
     fn resolve(&self) -> Result<Vec<VerbEntry>, GrammarError> {
-        let check_obj = |o: &ObjRef| check_name("object class", &o.class_name, &['<', '>']);
+        let check_obj = |o: &ObjRef| check_class(&o.class_name);
         let mut out: Vec<VerbEntry> = Vec::new();
         match self {
             ActionSet::Slots(verbs, objects) => {

@@ -327,19 +327,11 @@ pub fn line_verbs(line: &str) -> Vec<Verb> {
     }
 }
 
-/// The other state of a two-state pair, or the robot's other posture.
+/// The other state of a two-state pair, or the robot's other posture ([`State::opposite`]).
+/// CLEAN and DIRTY are left unpaired here, as they always were: every benchmark figure was
+/// measured so, and no run has tried a taken CLEAN line barring a DIRTY one.
 fn opposite(s: State) -> Option<State> {
-    Some(match s {
-        State::On => State::Off,
-        State::Off => State::On,
-        State::Open => State::Closed,
-        State::Closed => State::Open,
-        State::PluggedIn => State::PluggedOut,
-        State::PluggedOut => State::PluggedIn,
-        State::Sitting => State::Lying,
-        State::Lying => State::Sitting,
-        _ => return None,
-    })
+    s.opposite().filter(|_| !matches!(s, State::Clean | State::Dirty))
 }
 
 /// Lines left to set, one a line, for the prompt (shown next to the question).
@@ -2152,6 +2144,7 @@ mod tests {
         let w = World::demo_edited(|g| {
             g["nodes"].as_array_mut().unwrap().push(serde_json::json!(
                 {"id": 44, "class_name": "dish_soap", "category": "Props", "properties": [], "states": []}));
+            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 44, "relation_type": "INSIDE", "to_id": 1}));
         });
         assert_eq!(named_in(&w, "wash the dishes"), [17, 24, 25]);
         assert!(unknown_objects(&World::demo(), "wash the dishes").is_empty());
@@ -2833,8 +2826,14 @@ mod tests {
         // The demo's door (27) is open and inside the kitchen: it can be walked to and closed.
         let w = World::demo();
         assert!(candidates(&w, &[27], &[], None, &[], None).0.iter().any(|(l, _)| l == "door is CLOSED"));
-        // Without its room it cannot be reached: CLOSED is not offered, OPEN (it holds) is.
-        let w = World::demo_edited(|g| g["edges"].as_array_mut().unwrap().retain(|e| !(e["from_id"] == 27 && e["relation_type"] == "INSIDE")));
+        // Without its room (no scene loads so, but a run's edges can leave a node there) it cannot
+        // be reached: CLOSED is not offered, OPEN (it holds) is.
+        let mut w = World::demo();
+        let door = w.ix(27).unwrap();
+        for room in w.related(27, Relation::Inside) {
+            let r = w.ix(room).unwrap();
+            w.remove_edge(door, Relation::Inside, r);
+        }
         let lines: Vec<String> = candidates(&w, &[27], &[], None, &[], None).0.into_iter().map(|(l, _)| l).collect();
         assert!(!lines.contains(&"door is CLOSED".to_string()) && lines.contains(&"door is OPEN".to_string()), "{lines:?}");
     }

@@ -175,6 +175,33 @@ impl Program {
     }
 }
 
+/// One task's plan out of a file of EAI's LLM outputs, `[{"identifier", "llm_output"}, …]` (what
+/// `step eval plan --export-eai` writes and EAI's scorer reads): `None` when `text` is not such a
+/// list; an error naming the identifiers it has when none is `task`. The plan is in [`PlanFormat::Eai`].
+pub fn exported_plan(text: &str, task: &str) -> Option<Result<String, String>> {
+    use serde_json::Value;
+    let list: Vec<serde_json::Map<String, Value>> = serde_json::from_str(strip_bom(text)).ok()?;
+    if list.is_empty() || !list.iter().all(|e| e.contains_key("identifier") && e.contains_key("llm_output")) {
+        return None;
+    }
+    // EAI writes identifiers as strings; a number is read as its digits.
+    let text_of = |v: &Value| match v {
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    };
+    match list.iter().find(|e| text_of(&e["identifier"]) == task) {
+        Some(e) => Some(Ok(text_of(&e["llm_output"]))),
+        None => {
+            let ids: Vec<String> = list.iter().map(|e| text_of(&e["identifier"])).collect();
+            let shown = if ids.len() > 8 { format!("{}, …", ids[..8].join(", ")) } else { ids.join(", ") };
+            Some(Err(format!(
+                "a list of {} exported plans ({{\"identifier\", \"llm_output\"}}) with none for task '{task}' (it has: {shown}); give --task one of them",
+                ids.len()
+            )))
+        }
+    }
+}
+
 /// The text without a leading UTF-8 byte-order mark (which editors on Windows add, and which no
 /// parser here should see as content).
 pub fn strip_bom(text: &str) -> &str {
@@ -237,6 +264,25 @@ mod tests {
                 proptest::prop_assert_eq!(PlanFormat::detect(&text), f);
             }
         }
+    }
+
+    #[test]
+    fn a_task_plan_is_taken_out_of_a_file_of_exported_plans() {
+        let p = sample();
+        let file = serde_json::json!([
+            {"identifier": "3_1", "llm_output": "{\"WALK\": [\"kitchen\", 11]}"},
+            {"identifier": "27_2", "llm_output": p.write(PlanFormat::Eai)},
+        ])
+        .to_string();
+        let plan = exported_plan(&file, "27_2").unwrap().unwrap();
+        assert_eq!(Program::parse(&plan, PlanFormat::Eai).unwrap(), p);
+        let e = exported_plan(&file, "9_9").unwrap().unwrap_err();
+        assert!(e.contains("2 exported plans") && e.contains("task '9_9'") && e.contains("it has: 3_1, 27_2"), "{e}");
+        // Plans in the other forms, and other lists, are not such a file.
+        for f in PlanFormat::ALL {
+            assert!(exported_plan(&p.write(f), "27_2").is_none(), "{f}");
+        }
+        assert!(exported_plan(r#"[{"identifier": "3_1"}]"#, "3_1").is_none());
     }
 
     #[test]

@@ -11,6 +11,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use super::graph::{self, Edge, Graph, GraphError};
+use crate::action::ObjRef;
 use super::vocab::{Property, PropertySet, Relation, State, StateSet};
 
 /// Dense node index (position in id order).
@@ -88,8 +89,10 @@ fn invalid(origin: &str, message: String) -> GraphError {
 
 impl World {
     /// Builds a world from a graph. `origin` names the graph in errors (a path, `demo`, a task id).
-    /// Fails on a duplicate node id, an edge to a missing node, an unknown relation, state or
-    /// property, or a scene without a `character` node.
+    /// Fails on a duplicate node id, a class name no action line can hold, an edge to a missing
+    /// node or from a node to itself, an unknown relation, state or property, two states that
+    /// exclude each other ([`State::EXCLUSIVE`]), a node in no room, or a scene without a
+    /// `character` node.
     pub fn from_graph(g: &Graph, origin: &str) -> Result<World, GraphError> {
         let mut order: Vec<usize> = (0..g.nodes.len()).collect();
         order.sort_by_key(|&i| g.nodes.get(i).map(|n| n.id));
@@ -114,11 +117,20 @@ impl World {
                     s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 p.insert(v);
             }
+            if let Some(why) = ObjRef::class_name_problem(&n.class_name) {
+                return Err(invalid(origin, format!("node {}: class_name {:?}: {why}; rename the class", n.id, n.class_name)));
+            }
             let mut st = StateSet::EMPTY;
             for s in &n.states {
                 let v: State =
                     s.parse().map_err(|e| invalid(origin, format!("node {} <{}>: {e}", n.id, n.class_name)))?;
                 st.insert(v);
+            }
+            if let Some((a, b)) = State::EXCLUSIVE.into_iter().find(|&(a, b)| st.contains(a) && st.contains(b)) {
+                return Err(invalid(
+                    origin,
+                    format!("node {} <{}>: states {} and {} both given; keep the one it is in", n.id, n.class_name, a.name(), b.name()),
+                ));
             }
             class.push(n.class_name.clone());
             category.push(n.category.clone());
@@ -146,6 +158,14 @@ impl World {
                 })
             };
             let (f, t) = (look(e.from_id)?, look(e.to_id)?);
+            // A node on, in or held by itself has no place (EAI's scenes have none; their final
+            // graphs do have a node CLOSE to itself, which is harmless and kept).
+            if f == t && !matches!(r, Relation::Close | Relation::Facing) {
+                return Err(invalid(
+                    origin,
+                    format!("edge {} {} {}: a node cannot be {} itself; drop the edge", e.from_id, e.relation_type, e.to_id, r.name()),
+                ));
+            }
             out[f as usize].push((r, t));
             inc[t as usize].push((r, f));
         }
@@ -173,6 +193,18 @@ impl World {
             World { st: Arc::new(st), states, out, inc, grabbed_from: BTreeMap::new(), history: History::default() };
         w.history.character_hands_were_free = w.hands_free();
         w.history.character_held_something = !w.hands_free();
+        // Walking needs the room of what is walked to (VirtualHome's rule, `room_ix`): an object
+        // in no room could be named but never reached. Every node of EAI's scenes has one.
+        if let Some(ix) = (0..w.len() as Ix).find(|&ix| w.room_ix(ix).is_none()) {
+            let rooms: Vec<String> = w.rooms().iter().filter_map(|&r| w.node(r)).map(|n| n.label()).take(6).collect();
+            let fix = if rooms.is_empty() {
+                "the scene has no room (a node of category 'Rooms'): add one and put every object INSIDE it".to_string()
+            } else {
+                format!("add an INSIDE edge from it to a room ({}) or to an object that is in one", rooms.join(", "))
+            };
+            let n = w.view(ix);
+            return Err(invalid(origin, format!("node {} <{}> is in no room: {fix}", n.id, n.class_name)));
+        }
         Ok(w)
     }
 
@@ -526,6 +558,32 @@ mod tests {
         let dup = TINY.replace("\"id\":12", "\"id\":7");
         let e = World::from_json(&dup, "t.json").unwrap_err().to_string();
         assert!(e.contains("duplicate node id 7"), "{e}");
+    }
+
+    /// Scenes that parse but cannot be planned on, or whose meaning is arbitrary, are refused at
+    /// load with the node and the fix, not found out mid-plan (or never).
+    #[test]
+    fn scenes_no_plan_could_stand_on_are_refused_at_load() {
+        let refused = |text: &str| World::from_json(text, "t.json").unwrap_err().to_string();
+        let e = refused(&TINY.replace("[\"CLOSED\"]", "[\"CLOSED\",\"OPEN\"]"));
+        assert!(e.contains("node 5 <fridge>: states OPEN and CLOSED both given"), "{e}");
+        let e = refused(&TINY.replace("\"apple\"", "\"apple <x> (3)\""));
+        assert!(e.contains("node 12: class_name \"apple <x> (3)\"") && e.contains("'<'"), "{e}");
+        let e = refused(&TINY.replace("\"apple\"", "\"\""));
+        assert!(e.contains("node 12") && e.contains("empty"), "{e}");
+        let e = refused(&TINY.replace("\"relation_type\":\"ON\",\"to_id\":7", "\"relation_type\":\"ON\",\"to_id\":12"));
+        assert!(e.contains("edge 12 ON 12: a node cannot be ON itself"), "{e}");
+        // CLOSE to itself (EAI's final graphs have such edges) is kept.
+        let close_self = TINY.replace("\"relation_type\":\"CLOSE\",\"to_id\":7}]", "\"relation_type\":\"CLOSE\",\"to_id\":12}]");
+        assert!(World::from_json(&close_self, "t.json").is_ok());
+        // The fridge's only edge (INSIDE the kitchen) gone: it is in no room, and the rooms are named.
+        let e = refused(&TINY.replace("{\"from_id\":5,\"relation_type\":\"INSIDE\",\"to_id\":1},", ""));
+        assert!(e.contains("node 5 <fridge> is in no room") && e.contains("<kitchen> (1)"), "{e}");
+        // On the counter but not inside anything: ON does not place it in a room (VirtualHome's rule).
+        let e = refused(&TINY.replace("{\"from_id\":12,\"relation_type\":\"INSIDE\",\"to_id\":1},", ""));
+        assert!(e.contains("node 12 <apple> is in no room"), "{e}");
+        let e = refused(&TINY.replace("\"Rooms\"", "\"Furniture\""));
+        assert!(e.contains("is in no room") && e.contains("the scene has no room"), "{e}");
     }
 
     #[test]

@@ -124,6 +124,27 @@ name_enum! {
     }
 }
 
+impl State {
+    /// States no node can be in at once (the executor sets one and clears the other). A scene
+    /// giving both is refused: which of the two the executor's checks would see is arbitrary.
+    pub const EXCLUSIVE: [(State, State); 5] = [
+        (State::Open, State::Closed),
+        (State::On, State::Off),
+        (State::Clean, State::Dirty),
+        (State::PluggedIn, State::PluggedOut),
+        (State::Sitting, State::Lying),
+    ];
+
+    /// The state this one excludes ([`State::EXCLUSIVE`]), if any.
+    pub fn opposite(self) -> Option<State> {
+        State::EXCLUSIVE.iter().find_map(|&(a, b)| match self {
+            s if s == a => Some(b),
+            s if s == b => Some(a),
+            _ => None,
+        })
+    }
+}
+
 macro_rules! bit_set {
     ($(#[$m:meta])* $set:ident of $ty:ident) => {
         $(#[$m])*
@@ -186,6 +207,7 @@ mod tests {
         assert!(e.contains("unknown relation 'NEAR'") && e.contains("CLOSE"), "{e}");
         let mut s: StateSet = [State::Open, State::Dirty].into_iter().collect();
         assert!(s.contains(State::Open) && !s.contains(State::Closed));
+        assert_eq!((State::Open.opposite(), State::Closed.opposite(), State::Dirty.opposite()), (Some(State::Closed), Some(State::Open), Some(State::Clean)));
         s.remove(State::Open);
         assert_eq!(s.iter().collect::<Vec<_>>(), vec![State::Dirty]);
         assert_eq!(Property::ALL.len(), 23);
