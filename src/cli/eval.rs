@@ -231,7 +231,7 @@ fn plan(a: PlanArgs) -> anyhow::Result<()> {
         Some(f) => format!("task file {}", f.display()),
         None => "EAI VirtualHome tasks".to_string(),
     };
-    let source_name = if a.every > 1 { format!("{source_name}, every {}th", a.every) } else { source_name };
+    let source_name = if a.every > 1 { format!("{source_name}, every {}", ordinal(a.every)) } else { source_name };
     let report = PlanEvalReport::new(&cfg, source_name, reports, t0.elapsed().as_secs_f64());
     // The report first: an export that fails to write loses nothing else.
     if a.json {
@@ -326,4 +326,25 @@ fn gold(a: GoldArgs) -> anyhow::Result<()> {
     }
     println!("time: load {:.2} s, run {:.3} s, wall {:.2} s", timing.load_s, timing.run_s, timing.wall_s);
     Ok(())
+}
+
+/// `2nd`, `3rd`, `6th`, `11th`, `22nd`: how a report names `--every K`.
+fn ordinal(k: usize) -> String {
+    let suffix = match (k % 10, k % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{k}{suffix}")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_k_is_named_as_an_ordinal() {
+        let names: Vec<String> = [2, 3, 6, 11, 12, 13, 21, 22, 30, 101, 112].into_iter().map(super::ordinal).collect();
+        assert_eq!(names, ["2nd", "3rd", "6th", "11th", "12th", "13th", "21st", "22nd", "30th", "101st", "112th"]);
+    }
 }
