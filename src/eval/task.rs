@@ -25,7 +25,7 @@ use super::dataset::{task_id_key, EaiData};
 use super::goal::{Goal, RawGoal};
 use super::EvalError;
 use crate::program::{parse_step_line, Location, PlanParseError, Program};
-use crate::world::{read_scene, Graph, Node, State, World};
+use crate::world::{read_scene, Graph, Node, World};
 
 /// Where a task came from.
 #[derive(Clone, Debug, PartialEq, Eq)]

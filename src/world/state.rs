@@ -10,8 +10,9 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
 use std::sync::Arc;
 
-use super::graph::{self, Edge, Graph, GraphError};
 use crate::action::ObjRef;
+
+use super::graph::{self, Edge, Graph, GraphError};
 use super::vocab::{Property, PropertySet, Relation, State, StateSet};
 
 /// Dense node index (position in id order).
