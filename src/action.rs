@@ -16,28 +16,35 @@ pub struct ObjRef {
     pub id: u32,
 }
 
-/// The longest class name an action may name (a grammar spells every name out).
-pub const MAX_CLASS_CHARS: usize = 64;
+/// The longest name (a verb's, an object class's, a grammar's label) a line may hold: a grammar
+/// spells every name out.
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// Why `name` cannot stand as a name in a line, if it cannot: empty, longer than
+/// [`MAX_NAME_CHARS`], or holding a control character or one of `forbidden`, any of which would
+/// make the line ambiguous. The grammar builder asks it of every name it spells out.
+pub fn name_problem(name: &str, forbidden: &[char]) -> Option<String> {
+    if name.is_empty() {
+        return Some("it is empty".into());
+    }
+    if name.chars().count() > MAX_NAME_CHARS {
+        return Some(format!("it is longer than {MAX_NAME_CHARS} characters"));
+    }
+    name.chars()
+        .find(|c| c.is_control() || forbidden.contains(c))
+        .map(|c| format!("it contains {c:?}, which would make the line ambiguous"))
+}
 
 impl ObjRef {
     pub fn new(class_name: impl Into<String>, id: u32) -> Self {
         Self { class_name: class_name.into(), id }
     }
 
-    /// Why `name` cannot be an object's class in an action line (`<name> (id)`), if it cannot:
-    /// empty, too long, or holding `<`, `>` or a control character, any of which would make the
-    /// line ambiguous. The scene loader and the grammar builder both ask this, so a scene that
-    /// loads can always be planned on.
+    /// Why `name` cannot be an object's class in an action line (`<name> (id)`), if it cannot
+    /// ([`name_problem`], with `<` and `>`). The scene loader and the grammar builder both ask
+    /// this, so a scene that loads can always be planned on.
     pub fn class_name_problem(name: &str) -> Option<String> {
-        if name.is_empty() {
-            return Some("it is empty".into());
-        }
-        if name.chars().count() > MAX_CLASS_CHARS {
-            return Some(format!("it is longer than {MAX_CLASS_CHARS} characters"));
-        }
-        name.chars()
-            .find(|&c| c.is_control() || c == '<' || c == '>')
-            .map(|c| format!("it contains {c:?}, which would make the line ambiguous"))
+        name_problem(name, &['<', '>'])
     }
 }
 

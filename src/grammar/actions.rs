@@ -10,7 +10,7 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use crate::action::{action_line, parse_action_line, parse_action_parts, Action, LineSyntax, ObjRef, Verb};
+use crate::action::{action_line, name_problem, parse_action_line, parse_action_parts, Action, LineSyntax, ObjRef, Verb};
 
 use super::lark::lark_string;
 
@@ -26,7 +26,6 @@ pub const TEXT_SLICE: &str = r"[A-Za-z0-9 ,.'_\-]{1,10}";
 pub const MAX_TEXT_CHARS: usize = 1000;
 /// Upper bound on the number of body lines.
 pub const MAX_LINES: usize = 256;
-const MAX_NAME_CHARS: usize = 64;
 
 pub(super) fn is_text_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, ' ' | ',' | '.' | '\'' | '_' | '-')
@@ -169,24 +168,19 @@ pub fn parse_actions(text: &str) -> Result<Vec<Action>, ParseError> {
         .collect()
 }
 
+/// A name of `kind` the grammar spells out, by [`name_problem`].
 pub(super) fn check_name(kind: &'static str, name: &str, forbidden: &[char]) -> Result<(), GrammarError> {
-    let bad = |reason: String| Err(GrammarError::BadName { kind, name: name.to_string(), reason });
-    if name.is_empty() {
-        return bad("it is empty".into());
-    }
-    if name.chars().count() > MAX_NAME_CHARS {
-        return bad(format!("it is longer than {MAX_NAME_CHARS} characters"));
-    }
-    if let Some(c) = name.chars().find(|c| c.is_control() || forbidden.contains(c)) {
-        return bad(format!("it contains {c:?}, which would make the line ambiguous"));
-    }
-    Ok(())
+    bad_name(kind, name, name_problem(name, forbidden))
 }
 
 /// An object's class, by the rule the scene loader applies too ([`ObjRef::class_name_problem`]).
 pub(super) fn check_class(name: &str) -> Result<(), GrammarError> {
-    match ObjRef::class_name_problem(name) {
-        Some(reason) => Err(GrammarError::BadName { kind: "object class", name: name.to_string(), reason }),
+    bad_name("object class", name, ObjRef::class_name_problem(name))
+}
+
+fn bad_name(kind: &'static str, name: &str, problem: Option<String>) -> Result<(), GrammarError> {
+    match problem {
+        Some(reason) => Err(GrammarError::BadName { kind, name: name.to_string(), reason }),
         None => Ok(()),
     }
 }

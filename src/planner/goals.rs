@@ -15,7 +15,7 @@ use super::PlanRequest;
 use crate::action::Verb;
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::{Property, Relation, State};
-use crate::world::affordance::slot_admits;
+use crate::world::affordance::{slot_admits, SlotRequirement};
 use crate::world::{Fact, Tool, World};
 
 /// What a candidate line asks for.
@@ -357,7 +357,7 @@ pub const MAX_AFFORDED_OBJECTS: usize = 8;
 pub fn afforded_objects(w: &World, focus: &[u32], instruction: &str) -> (Vec<u32>, Vec<Verb>) {
     let verbs: Vec<Verb> = verbs_named(instruction)
         .into_iter()
-        .filter(|&v| v.arity() >= 1 && !crate::world::affordance::SlotRequirement::of(v, 0).is_any())
+        .filter(|&v| v.arity() >= 1 && !SlotRequirement::of(v, 0).is_any())
         .collect();
     let robot = w.character();
     let objects: Vec<u32> = focus
