@@ -206,6 +206,19 @@ fn every_zero_is_rejected_by_each_command_that_takes_it() {
 }
 
 #[test]
+fn every_with_chosen_tasks_is_refused() {
+    // Both at once ran every K-th of the ids given: with two ids and `--every 2`, one task.
+    let tasks = demo_tasks();
+    for cmd in [&["eval", "plan"][..], &["bench", "nodes"][..]] {
+        let mut args = cmd.to_vec();
+        args.extend(["--planner", "random", "--tasks-file", &tasks, "--task", "watch_tv", "--task", "apple_in_fridge", "--every", "2"]);
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--every") && stderr(&o).contains("--task"), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
 fn bench_llm_rejects_zero_runs() {
     let o = run(&["bench", "llm", "--runs", "0"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -315,6 +328,10 @@ fn an_instruction_naming_an_object_the_scene_lacks_is_warned_about_and_reported(
     );
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(v["unknown_objects"], serde_json::json!([]));
+    // One that names no object is read as about what its verbs can be done with (this line was
+    // "[the instruction names ]").
+    let o = plan("go to sleep");
+    assert!(stderr(&o).contains("[the instruction names no object; SLEEP can be done with: <sofa> (30)]"), "{}", stderr(&o));
 }
 
 #[test]

@@ -90,6 +90,8 @@ fn step_plan_on_the_demo_does_what_plain_instructions_say() {
         // (it lay down on the sofa it was to go to, and kept the book it was to put back)
         ("go to the sofa", "[WALK] <sofa> (30)"),
         ("take the book, read it and put it back", "[PUTBACK] <book> (34) <coffee_table> (33)"),
+        // (it sat on the chair and never slept: SLEEP takes no object and waits for a posture)
+        ("go to sleep", "[SLEEP]"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_step"))
             .args(["plan", instruction, "--json", "--quiet", "--model"])

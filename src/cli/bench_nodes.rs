@@ -37,8 +37,8 @@ pub struct NodesArgs {
     /// Only these task ids (repeatable); default: every 30th EAI task, or the whole task file.
     #[arg(long = "task", value_name = "ID")]
     pub only: Vec<String>,
-    /// Every K-th task (default 30 for EAI's set, 1 for a task file).
-    #[arg(long, value_name = "K")]
+    /// Every K-th task (default 30 for EAI's set, 1 for a task file); not with `--task`.
+    #[arg(long, value_name = "K", conflicts_with = "only")]
     pub every: Option<usize>,
     /// Most actions per task (keeps the bench short).
     #[arg(long, default_value_t = 20)]

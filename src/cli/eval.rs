@@ -63,8 +63,9 @@ pub struct PlanArgs {
     /// Only these task ids (repeatable).
     #[arg(long = "task", value_name = "ID")]
     pub only: Vec<String>,
-    /// Every K-th task in id order (a fixed subset while developing).
-    #[arg(long, value_name = "K", default_value_t = 1)]
+    /// Every K-th task in id order (a fixed subset while developing). Not with `--task`, which
+    /// chooses the tasks itself (both at once ran every K-th of the ids given).
+    #[arg(long, value_name = "K", default_value_t = 1, conflicts_with = "only")]
     pub every: usize,
     /// Seed of the random planner (and of sampling, when sampling).
     #[arg(long, default_value_t = 0)]

@@ -217,7 +217,12 @@ fn echo_tree() -> Box<dyn FnMut(&str, &Value)> {
                 };
                 let holding = list("holding_them");
                 let holding = if holding.is_empty() { String::new() } else { format!("; on or in: {holding}") };
-                eprintln!("  [the instruction names {}{holding}]", list("named"));
+                // (one that names no object is about what its verbs can be done with: "have a
+                // drink" printed "the instruction names ;" before that was told)
+                match v.get("afforded") {
+                    Some(_) => eprintln!("  [the instruction names no object; {} can be done with: {}{holding}]", list("by_verbs"), list("afforded")),
+                    None => eprintln!("  [the instruction names {}{holding}]", list("named")),
+                }
             }
             "goal_candidates" => {
                 if let Some(why) = v["why"].as_str() {

@@ -200,7 +200,14 @@ impl Run<'_> {
             let arrived_only = self.goals.only_arrived(self.world()?, &st.tried, &subgoal_menu);
             !st.tried.is_empty() && !self.goals.said.iter().any(unsaid) && !arrived_only
         } else {
+            // (below a line of a verb taken lying or sitting, SLEEP, the posture is the way to
+            // it, as a target's steps are to its action: the line ends when the verb runs, once
+            // it can; SmolLM2 lay on the sofa for "sleep" and said done)
+            let posture_way = self.under_offered(node)
+                && matches!(self.goals.meaning(&self.tree.node(node).text), Some(goals::Meaning::Verb(v)) if goals::TAKEN_IN_A_POSTURE.contains(v))
+                && !matches!(&actions, ActionSet::Exact(l) if l.is_empty());
             !(target.is_some() && self.cfg.target_steps)
+                && !posture_way
                 && !(offered && allow_subgoal)
                 && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()))
         };
@@ -418,6 +425,18 @@ impl Run<'_> {
                     // all was offered before: SmolLM2 sat on six seats in turn under "DRINK".
                     let aims = typed_actions(w, named).into_iter().filter(|a| a.verb == *v).collect();
                     let aims = narrowed(aims, said_of);
+                    // A verb of no object that waits for the robot to lie or sit (SLEEP): the
+                    // posture, on a named thing where one fits, else on one of the focus; where
+                    // it can be taken now, that step itself (a way leads up to it, not into it).
+                    let postures = match v.arity() {
+                        0 => narrowed(goals::bare_postures(w, *v, &self.focus, &self.focus), on_named),
+                        _ => Vec::new(),
+                    };
+                    let now: Vec<Action> = postures.iter().filter(|a| list.contains(a)).cloned().collect();
+                    if !now.is_empty() {
+                        return Ok(ActionSet::Exact(now));
+                    }
+                    let aims = if postures.is_empty() { aims } else { postures };
                     return Ok(ActionSet::Exact(self.first_steps(w, aims, &list, |_, _| true)));
                 } else {
                     narrowed(narrowed(doing, on_named), said_of)

@@ -12,7 +12,7 @@ use std::collections::BTreeSet;
 
 use super::rules::{changes_nothing, gained, only_lets_go, trial};
 use super::PlanRequest;
-use crate::action::Verb;
+use crate::action::{Action, Verb};
 use crate::scene_grammar::typed_actions;
 use crate::world::vocab::{Property, Relation, State};
 use crate::world::affordance::{slot_admits, SlotRequirement};
@@ -354,18 +354,23 @@ pub const MAX_AFFORDED_OBJECTS: usize = 8;
 /// verb it names, and those verbs. Only verbs that ask something of their object count (DRINK a
 /// drinkable thing; not WALK or TOUCH, which take any); none where the objects are more than
 /// [`MAX_AFFORDED_OBJECTS`]. Read once, at the start, as a person would ("something to drink").
+/// A verb of no object that waits for the robot to lie or sit ("go to sleep") counts with the
+/// things it can be done on ([`bare_postures`]).
 pub fn afforded_objects(w: &World, focus: &[u32], instruction: &str) -> (Vec<u32>, Vec<Verb>) {
-    let verbs: Vec<Verb> = verbs_named(instruction)
-        .into_iter()
-        .filter(|&v| v.arity() >= 1 && !SlotRequirement::of(v, 0).is_any())
-        .collect();
+    let said = verbs_named(instruction);
+    let mut verbs: Vec<Verb> = said.iter().copied().filter(|&v| v.arity() >= 1 && !SlotRequirement::of(v, 0).is_any()).collect();
     let robot = w.character();
-    let objects: Vec<u32> = focus
-        .iter()
-        .copied()
-        .filter(|&id| id != robot && w.node(id).is_some_and(|n| !n.is_room()))
-        .filter(|&id| verbs.iter().any(|&v| slot_admits(w, v, 0, id)))
-        .collect();
+    let things: Vec<u32> = focus.iter().copied().filter(|&id| id != robot && w.node(id).is_some_and(|n| !n.is_room())).collect();
+    let mut seats: Vec<u32> = Vec::new();
+    for v in said.into_iter().filter(|v| v.arity() == 0) {
+        let on: Vec<u32> = bare_postures(w, v, &things, focus).iter().map(|a| a.args[0].id).collect();
+        if !on.is_empty() {
+            verbs.push(v);
+            seats.extend(on);
+        }
+    }
+    let objects: Vec<u32> =
+        things.into_iter().filter(|&id| seats.contains(&id) || verbs.iter().any(|&v| v.arity() >= 1 && slot_admits(w, v, 0, id))).collect();
     if objects.is_empty() || objects.len() > MAX_AFFORDED_OBJECTS {
         return (Vec::new(), Vec::new());
     }
@@ -419,6 +424,39 @@ pub fn made_by_verbs(
     let offered = |l: &String| kept.iter().any(|(k, _)| k == l);
     let said = said.into_iter().map(|g| g.into_iter().filter(offered).collect::<Vec<_>>()).filter(|g| !g.is_empty()).collect();
     (kept, said)
+}
+
+/// Verbs of no object that begin by lying or sitting down ([`bare_postures`]). Not WAKEUP, which
+/// the executor lets run from the same postures: it ends a sleep, and lying down to wake up
+/// would be no reading of "wake up".
+pub const TAKEN_IN_A_POSTURE: &[Verb] = &[Verb::Sleep];
+
+/// For SLEEP ([`TAKEN_IN_A_POSTURE`]) while the robot is neither lying nor sitting: the LIE and
+/// SIT actions on `objects` after which it runs and changes nothing, their way kept within
+/// `focus`; only the LIE ones where there are any (one sleeps lying down). Empty where the verb
+/// runs now or nothing leads to it. The world's own way to it finds none, as its failure names
+/// no single step ("LIE on a bed or SIT first").
+pub fn bare_postures(w: &World, v: Verb, objects: &[u32], focus: &[u32]) -> Vec<Action> {
+    let bare = Action { verb: v, args: Vec::new() };
+    if !TAKEN_IN_A_POSTURE.contains(&v) || w.why_not(&bare).is_none() {
+        return Vec::new();
+    }
+    let robot = w.character();
+    let in_focus = |a: &Action| a.args.iter().all(|o| focus.contains(&o.id));
+    let leads = |a: &Action| {
+        let Some((way, before)) = w.way_to(a) else { return false };
+        let Some(after) = trial(&before, a) else { return false };
+        let lying_or_sitting = [State::Lying, State::Sitting].into_iter().any(|state| after.holds(&Fact::State { id: robot, state }));
+        way.iter().all(in_focus) && lying_or_sitting && trial(&after, &bare).is_some_and(|then| changes_nothing(&after, &then, &bare))
+    };
+    let mut ways: Vec<Action> = typed_actions(w, objects)
+        .into_iter()
+        .filter(|a| matches!(a.verb, Verb::Lie | Verb::Sit) && in_focus(a) && leads(a))
+        .collect();
+    if ways.iter().any(|a| a.verb == Verb::Lie) {
+        ways.retain(|a| a.verb == Verb::Lie);
+    }
+    ways
 }
 
 /// The most objects whose candidate lines are enumerated: past it (an instruction that names
@@ -556,6 +594,19 @@ pub fn candidates(
                     made_by.push((line.clone(), a.verb));
                     push(line, Meaning::Fact(left));
                 }
+            }
+        }
+    }
+    // A verb of no object that the words name and that changes nothing (SLEEP, WAKEUP) is a line
+    // where it runs now or after a posture on a thing of the focus ([`bare_postures`]): with no
+    // object, the loop above never meets it, and SmolLM2 lay on the bed for "go to sleep" and
+    // stopped there.
+    if let Some(t) = instruction {
+        for &v in Verb::ALL.iter().filter(|v| v.arity() == 0 && !excluded.contains(v)) {
+            let bare = Action { verb: v, args: Vec::new() };
+            let runs_idle = |before: &World| trial(before, &bare).is_some_and(|after| changes_nothing(before, &after, &bare));
+            if !idle.contains(&v) && names_verb(t, v) && (runs_idle(w) || !bare_postures(w, v, &objects, focus).is_empty()) {
+                idle.push(v);
             }
         }
     }
@@ -2331,6 +2382,8 @@ mod tests {
         let afforded = |t: &str| afforded_objects(&w, &all, t);
         assert_eq!(afforded("sit down"), (vec![19, 30], vec![Verb::Sit]));
         assert_eq!(afforded("lie down"), (vec![30], vec![Verb::Lie]));
+        // Sleep waits for the robot to lie down: on what it can lie on.
+        assert_eq!(afforded("go to sleep"), (vec![30], vec![Verb::Sleep]));
         assert_eq!(afforded("eat something"), (vec![11, 12, 14], vec![Verb::Eat]));
         // Said as a noun, or split round "it".
         assert_eq!(afforded("have a drink").1, [Verb::Drink]);
@@ -2363,6 +2416,42 @@ mod tests {
         assert_eq!(verbs_named("switch the light off"), [Verb::SwitchOff]);
         assert_eq!(verbs_named("have a drink"), [Verb::Drink]);
         assert!(verbs_named("hello there").is_empty());
+    }
+
+    /// SLEEP names no object and waits for the robot to lie or sit, a step the world's way to it
+    /// cannot choose: "go to sleep" offers its line where a posture on a thing of the focus leads
+    /// to it (lying down, where a thing can be lain on), and a task that does not name it does not.
+    #[test]
+    fn a_verb_of_no_object_is_offered_where_a_posture_leads_to_it() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let names = |v: Vec<Action>| v.iter().map(|a| a.to_string()).collect::<Vec<_>>();
+        // The demo's sofa (30) can be lain on, its chair (19) only sat on.
+        assert_eq!(names(bare_postures(&w, Verb::Sleep, &all, &all)), ["[LIE] <sofa> (30)"]);
+        // One wakes from a sleep, not by lying down.
+        assert!(bare_postures(&w, Verb::WakeUp, &all, &all).is_empty());
+        // Only within the focus; a sitting robot sleeps where it is.
+        let no_sofa: Vec<u32> = all.iter().copied().filter(|&id| id != 30).collect();
+        assert_eq!(names(bare_postures(&w, Verb::Sleep, &no_sofa, &no_sofa)), ["[SIT] <chair> (19)"]);
+        assert!(bare_postures(&w, Verb::Sleep, &[12, 10], &[12, 10]).is_empty());
+        let mut seated = w.clone();
+        let sit = Action { verb: Verb::Sit, args: vec![crate::action::ObjRef::new("chair", 19)] };
+        for a in seated.way_to(&sit).unwrap().0 {
+            seated.execute(&a).unwrap();
+        }
+        seated.execute(&sit).unwrap();
+        assert!(bare_postures(&seated, Verb::Sleep, &all, &all).is_empty());
+        let lines = |w: &World, t: &str, focus: &[u32]| -> Vec<String> {
+            candidates(w, focus, &[], Some(t), &instruction_objects(w, focus, t), Some(&Wording::of(w, focus, t)))
+                .0
+                .into_iter()
+                .map(|(l, _)| l)
+                .collect()
+        };
+        assert!(lines(&w, "go to sleep", &all).contains(&"SLEEP".to_string()));
+        assert!(lines(&seated, "go to sleep", &all).contains(&"SLEEP".to_string()));
+        assert!(!lines(&w, "go to sleep", &[12, 10]).contains(&"SLEEP".to_string()));
+        assert!(!lines(&w, "sit on the sofa", &all).contains(&"SLEEP".to_string()));
     }
 
     #[test]
@@ -2704,13 +2793,17 @@ mod tests {
         assert!(lie.contains(&vec!["character is LYING".to_string()]), "{lie:?}");
         // The everyday words for lying down say the same; "lay" only before a particle ("lay
         // the book on the sofa" puts the book there).
-        for t in ["lay on the sofa", "I lay down on the sofa", "sleep on the sofa", "lying on the sofa"] {
+        for t in ["lay on the sofa", "I lay down on the sofa", "lying on the sofa"] {
             assert_eq!(said(&[30], t), lie, "{t}");
         }
+        // "sleep" says SLEEP too, which lying there leads to: either line is what it asks.
+        let mut sleep = lie.clone();
+        sleep[1].push("SLEEP".to_string());
+        assert_eq!(said(&[30], "sleep on the sofa"), sleep);
         assert!(!said(&[34, 30], "lay the book on the sofa").contains(&vec!["character is LYING".to_string()]));
         // Of two postures in turn, the later is what the words end with.
         let both = said(&[30], "sit on the sofa and relax, then sleep on the sofa");
-        assert!(both.contains(&vec!["character is LYING".to_string()]), "{both:?}");
+        assert!(both.contains(&sleep[1]), "{both:?}");
         assert!(!both.contains(&vec!["character is SITTING".to_string()]), "{both:?}");
     }
 

@@ -196,7 +196,8 @@ pub(crate) fn run_tree(
     // (SmolLM2 walked to a chair and sat for "stand up" said of a robot standing, and took the
     // chair for "get up from the chair")
     let said: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| goals::names_verb(&req.instruction, *v)).collect();
-    let bare_verbs = if focus_is_scene && said.iter().all(|v| v.arity() == 0) { said } else { Vec::new() };
+    // (not "sleep", which is taken lying on a thing: `afforded_objects` found it)
+    let bare_verbs = if focus_is_scene && afforded.is_empty() && said.iter().all(|v| v.arity() == 0) { said } else { Vec::new() };
     let start_state = env.observe(&root_view, cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
