@@ -196,18 +196,19 @@ impl Run<'_> {
         // line about something else is offered: "go to the toilet")
         let inferring = offered && self.goals.inferred;
         let unsaid = |g: &Vec<String>| !g.iter().any(|l| st.tried.contains(l)) && g.iter().any(|l| subgoal_menu.contains(l));
+        // (below a line of a verb taken lying or sitting, SLEEP, the posture is the way to it, as
+        // a target's steps are to its action: the line ends when the verb runs, once it can;
+        // SmolLM2 lay on the sofa for "sleep" and said done)
+        let posture_way = self.under_offered(node)
+            && matches!(self.goals.meaning(&self.tree.node(node).text), Some(goals::Meaning::Verb(v)) if goals::TAKEN_IN_A_POSTURE.contains(v))
+            && !matches!(&actions, ActionSet::Exact(l) if l.is_empty());
         let allow_done = if inferring {
             let arrived_only = self.goals.only_arrived(self.world()?, &st.tried, &subgoal_menu);
             !st.tried.is_empty() && !self.goals.said.iter().any(unsaid) && !arrived_only
+        } else if posture_way {
+            false
         } else {
-            // (below a line of a verb taken lying or sitting, SLEEP, the posture is the way to
-            // it, as a target's steps are to its action: the line ends when the verb runs, once
-            // it can; SmolLM2 lay on the sofa for "sleep" and said done)
-            let posture_way = self.under_offered(node)
-                && matches!(self.goals.meaning(&self.tree.node(node).text), Some(goals::Meaning::Verb(v)) if goals::TAKEN_IN_A_POSTURE.contains(v))
-                && !matches!(&actions, ActionSet::Exact(l) if l.is_empty());
             !(target.is_some() && self.cfg.target_steps)
-                && !posture_way
                 && !(offered && allow_subgoal)
                 && (st.accepted > 0 || (!allow_subgoal && actions.is_empty()))
         };
