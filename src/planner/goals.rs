@@ -433,7 +433,8 @@ pub const TAKEN_IN_A_POSTURE: &[Verb] = &[Verb::Sleep];
 
 /// For SLEEP ([`TAKEN_IN_A_POSTURE`]) while the robot is neither lying nor sitting: the LIE and
 /// SIT actions on `objects` after which it runs and changes nothing, their way kept within
-/// `focus`; only the LIE ones where there are any (one sleeps lying down). Empty where the verb
+/// `focus`; only the LIE ones where there are any (one sleeps lying down), and of those the ones
+/// on a bed ([`SLEPT_IN`]) where there are any. Empty where the verb
 /// runs now or nothing leads to it. The world's own way to it finds none, as its failure names
 /// no single step ("LIE on a bed or SIT first").
 pub fn bare_postures(w: &World, v: Verb, objects: &[u32], focus: &[u32]) -> Vec<Action> {
@@ -455,9 +456,18 @@ pub fn bare_postures(w: &World, v: Verb, objects: &[u32], focus: &[u32]) -> Vec<
         .collect();
     if ways.iter().any(|a| a.verb == Verb::Lie) {
         ways.retain(|a| a.verb == Verb::Lie);
+        // (and in a bed where there is one: SmolLM2, offered every mat, bench and couch of a
+        // house, slept in the bathtub)
+        let in_bed = |a: &Action| a.args.first().is_some_and(|o| SLEPT_IN.contains(&o.class_name.as_str()));
+        if ways.iter().any(in_bed) {
+            ways.retain(in_bed);
+        }
     }
     ways
 }
+
+/// The classes of things made to sleep in, taken before anything else one can lie on.
+const SLEPT_IN: &[&str] = &["bed"];
 
 /// The most objects whose candidate lines are enumerated: past it (an instruction that names
 /// nothing in a whole house) the lines would be thousands and nothing tells them apart.
@@ -2434,6 +2444,15 @@ mod tests {
         let no_sofa: Vec<u32> = all.iter().copied().filter(|&id| id != 30).collect();
         assert_eq!(names(bare_postures(&w, Verb::Sleep, &no_sofa, &no_sofa)), ["[SIT] <chair> (19)"]);
         assert!(bare_postures(&w, Verb::Sleep, &[12, 10], &[12, 10]).is_empty());
+        // A bed (40, in the living room) is where one sleeps, before the sofa.
+        let with_bed = World::demo_edited(|g| {
+            g["nodes"].as_array_mut().unwrap().push(serde_json::json!({
+                "id": 40, "class_name": "bed", "category": "Furniture", "properties": ["LIEABLE", "SITTABLE", "SURFACES"], "states": []
+            }));
+            g["edges"].as_array_mut().unwrap().push(serde_json::json!({"from_id": 40, "relation_type": "INSIDE", "to_id": 2}));
+        });
+        let all_bed: Vec<u32> = with_bed.nodes().map(|n| n.id).collect();
+        assert_eq!(names(bare_postures(&with_bed, Verb::Sleep, &all_bed, &all_bed)), ["[LIE] <bed> (40)"]);
         let mut seated = w.clone();
         let sit = Action { verb: Verb::Sit, args: vec![crate::action::ObjRef::new("chair", 19)] };
         for a in seated.way_to(&sit).unwrap().0 {
