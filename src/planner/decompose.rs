@@ -429,10 +429,7 @@ impl Run<'_> {
                     // A verb of no object that waits for the robot to lie or sit (SLEEP): the
                     // posture, on a named thing where one fits, else on one of the focus; where
                     // it can be taken now, that step itself (a way leads up to it, not into it).
-                    let postures = match v.arity() {
-                        0 => narrowed(goals::bare_postures(w, *v, &self.focus, &self.focus), on_named),
-                        _ => Vec::new(),
-                    };
+                    let postures = narrowed(goals::bare_postures(w, *v, &self.focus, &self.focus), on_named);
                     let now: Vec<Action> = postures.iter().filter(|a| list.contains(a)).cloned().collect();
                     if !now.is_empty() {
                         return Ok(ActionSet::Exact(now));

@@ -442,13 +442,12 @@ pub fn bare_postures(w: &World, v: Verb, objects: &[u32], focus: &[u32]) -> Vec<
     if !TAKEN_IN_A_POSTURE.contains(&v) || w.why_not(&bare).is_none() {
         return Vec::new();
     }
-    let robot = w.character();
     let in_focus = |a: &Action| a.args.iter().all(|o| focus.contains(&o.id));
+    // (the verb's own check is the posture: its running after the action says the action took it)
     let leads = |a: &Action| {
         let Some((way, before)) = w.way_to(a) else { return false };
         let Some(after) = trial(&before, a) else { return false };
-        let lying_or_sitting = [State::Lying, State::Sitting].into_iter().any(|state| after.holds(&Fact::State { id: robot, state }));
-        way.iter().all(in_focus) && lying_or_sitting && trial(&after, &bare).is_some_and(|then| changes_nothing(&after, &then, &bare))
+        way.iter().all(in_focus) && trial(&after, &bare).is_some_and(|then| changes_nothing(&after, &then, &bare))
     };
     let mut ways: Vec<Action> = typed_actions(w, objects)
         .into_iter()
