@@ -76,9 +76,10 @@ impl Run<'_> {
         let set = self.action_set(node)?;
         // An instruction whose every verb takes no object ("stand up", "get up from the chair"):
         // the root's steps are those verbs' alone, and it is done when none can run.
-        let bare = is_root && !self.bare_verbs.is_empty();
+        let bare = is_root && (!self.bare_verbs.is_empty() || self.cannot.is_some());
         let set = if bare {
-            let others: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| !self.bare_verbs.contains(v)).collect();
+            // (words that ask only what their things cannot have done to them: no step at all)
+            let others: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| self.cannot.is_some() || !self.bare_verbs.contains(v)).collect();
             set.without(&others)
         } else {
             set

@@ -468,6 +468,53 @@ pub fn bare_postures(w: &World, v: Verb, objects: &[u32], focus: &[u32]) -> Vec<
 /// The classes of things made to sleep in, taken before anything else one can lie on.
 const SLEPT_IN: &[&str] = &["bed"];
 
+/// The verbs `instruction` says that ask something of a thing ([`verbs_named`]; moves and verbs
+/// of no object aside) where none of them can be done to any of the `named` things: "open the
+/// apple", "sit on the apple", "switch on the chair" ([`SlotRequirement::of`]). Empty where one
+/// can, where the words say no such verb, or where they say a verb of no object ("sleep on the
+/// chair" is done sitting there, [`bare_postures`]). Over a whole scene, such words were read as
+/// being about the thing alone, and SmolLM2 took the apple in hand and said done.
+pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) -> Vec<Verb> {
+    let said = verbs_named(instruction);
+    let things: Vec<u32> = named.iter().copied().filter(|&id| w.node(id).is_some_and(|n| !n.is_room())).collect();
+    if things.is_empty() || said.iter().any(|v| v.arity() == 0) {
+        return Vec::new();
+    }
+    let asked: Vec<Verb> = said.into_iter().filter(|v| !matches!(v, Verb::Walk | Verb::Run | Verb::Find)).collect();
+    let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
+    let done_to_one = |v: Verb| {
+        typed_actions(w, &objects).into_iter().any(|a| a.verb == v && a.args.iter().any(|o| things.contains(&o.id)))
+    };
+    if asked.iter().any(|&v| done_to_one(v)) {
+        return Vec::new();
+    }
+    asked
+}
+
+/// What the user is told for [`unafforded`] `verbs`: what each needs of its thing and, where the
+/// scene has some, up to four things of `focus` that have it (the fix: name one of those).
+pub fn unafforded_message(w: &World, focus: &[u32], verbs: &[Verb], named: &[u32]) -> String {
+    let label = |id: u32| w.node(id).map(|n| n.label()).unwrap_or_default();
+    let things: Vec<String> = named.iter().filter(|&&id| w.node(id).is_some_and(|n| !n.is_room())).map(|&id| label(id)).collect();
+    let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
+    let typed = typed_actions(w, &objects);
+    let mut parts = Vec::new();
+    for &v in verbs {
+        let need = SlotRequirement::of(v, 0).describe();
+        let mut can: Vec<u32> = typed.iter().filter(|a| a.verb == v).filter_map(|a| a.args.first().map(|o| o.id)).collect();
+        can.dedup();
+        let examples = match can.len() {
+            0 => "nothing here is".to_string(),
+            n => {
+                let some: Vec<String> = can.iter().take(4).map(|&id| label(id)).collect();
+                format!("here: {}{}", some.join(", "), if n > 4 { format!(" and {} more", n - 4) } else { String::new() })
+            }
+        };
+        parts.push(format!("[{}] needs {need} ({examples})", v.name()));
+    }
+    format!("the words ask what {} cannot have done to it: {}; name a thing that can", things.join(", "), parts.join("; "))
+}
+
 /// The most objects whose candidate lines are enumerated: past it (an instruction that names
 /// nothing in a whole house) the lines would be thousands and nothing tells them apart.
 pub const MAX_GOAL_OBJECTS: usize = 40;
@@ -2417,6 +2464,26 @@ mod tests {
         let (kept, _) = made_by_verbs(&w, &objects, &verbs, c, said);
         let lines: Vec<&str> = kept.iter().map(|(l, _)| l.as_str()).collect();
         assert!(lines.contains(&"light is OFF") && lines.iter().all(|l| l.ends_with(" is OFF")), "{lines:?}");
+    }
+
+    #[test]
+    fn verbs_no_named_thing_affords_are_found() {
+        let w = World::demo();
+        let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
+        let un = |t: &str| unafforded(&w, &all, t, &instruction_objects(&w, &all, t));
+        assert_eq!(un("open the apple"), vec![Verb::Open]);
+        assert_eq!(un("switch on the chair"), vec![Verb::SwitchOn]);
+        assert_eq!(un("lie on the chair"), vec![Verb::Lie]);
+        // Both verbs, neither of which the apple affords.
+        assert_eq!(un("open the apple and sit on it"), vec![Verb::Open, Verb::Sit]);
+        // One that can be done is enough; moves ask nothing of a thing.
+        for t in ["open the fridge", "grab the apple and open it", "walk to the apple", "put the apple in the fridge", "the apple"] {
+            assert_eq!(un(t), Vec::<Verb>::new(), "{t}");
+        }
+        // A verb of no object: "sleep on the chair" is done sitting there.
+        assert_eq!(un("sleep on the chair"), Vec::<Verb>::new());
+        let told = unafforded_message(&w, &all, &[Verb::Open], &[12]);
+        assert!(told.starts_with("the words ask what <apple> (12) cannot have done to it: [OPEN] needs CAN_OPEN, or a desk, or a window (here: <fridge> (10)"), "{told}");
     }
 
     #[test]

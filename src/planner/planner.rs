@@ -154,6 +154,10 @@ pub(crate) struct Run<'a> {
     /// Over a whole scene, where the instruction names no object but verbs that ask something of
     /// theirs ("have a drink"), those verbs; `root_objects` are then the objects that afford them.
     pub(super) afforded_by: Vec<Verb>,
+    /// Over a whole scene, where every verb the instruction asks of its things is one none of them
+    /// affords ("open the apple"), what the user is told ([`goals::unafforded`]): the root is then
+    /// offered no step.
+    pub(super) cannot: Option<String>,
 }
 
 /// Runs the tree planner (kinds `step`, `no-tree`, `no-subgoal-tree`).
@@ -198,12 +202,19 @@ pub(crate) fn run_tree(
     let said: Vec<Verb> = Verb::ALL.iter().copied().filter(|v| goals::names_verb(&req.instruction, *v)).collect();
     // (not "sleep", which is taken lying on a thing: `afforded_objects` found it)
     let bare_verbs = if focus_is_scene && afforded.is_empty() && said.iter().all(|v| v.arity() == 0) { said } else { Vec::new() };
+    // (SmolLM2 took the apple in hand for "open the apple", and switched the fridge on for "eat
+    // the fridge", and said done)
+    let cannot = env.world().filter(|_| focus_is_scene && afforded.is_empty()).and_then(|w| {
+        let verbs = goals::unafforded(w, &focus, &req.instruction, &root_objects);
+        (!verbs.is_empty()).then(|| goals::unafforded_message(w, &focus, &verbs, &root_objects))
+    });
     let start_state = env.observe(&root_view, cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
         bare_verbs,
         root_objects,
         afforded_by: afforded,
+        cannot,
         root_view,
         focus_is_scene,
         last_change: Vec::new(),
@@ -228,6 +239,9 @@ pub(crate) fn run_tree(
         // What the planner took the instruction to be about: a user can see a misreading at once.
         run.trace.event("instruction_objects", objects);
     }
+    if let Some(why) = run.cannot.clone() {
+        run.trace.event("goal_candidates", json!({"lines": [], "why": why}));
+    }
     let root = run.tree.root();
     run.infer_goals();
     run.warm();
@@ -239,6 +253,11 @@ pub(crate) fn run_tree(
                 (true, false) => "every offered goal line was taken",
                 (true, true) => "the model said done after setting its goals",
                 (false, _) => "the model said done",
+            };
+            // (offered no step, it is done without a call: the root says why)
+            let why = match &run.cannot {
+                Some(cannot) => format!("nothing to do: {cannot}"),
+                None => why.to_string(),
             };
             run.set_status(root, Status::Executed, why);
             StopCause::Done
@@ -259,6 +278,10 @@ impl Run<'_> {
     /// as it is without a world, over too many objects, or when nothing can be stated.
     fn infer_goals(&mut self) {
         if !self.cfg.infer_goals || !self.goals.lines.is_empty() || self.mode == ContextMode::NoSubgoalTree {
+            return;
+        }
+        // (words that ask only what cannot be done are told so, `run_tree`, and set no goal)
+        if self.cannot.is_some() {
             return;
         }
         let Ok(focus) = self.node_focus(self.tree.root()) else { return };

@@ -2197,6 +2197,42 @@ fn a_goal_line_undone_again_after_it_was_offered_again_is_offered_once_more() {
 }
 
 #[test]
+fn words_that_ask_what_their_thing_cannot_do_plan_nothing_and_say_why() {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    // Over the whole demo kitchen, no model is asked (the script is empty: a call would end the
+    // test), nothing runs, and the trace names what the verb needs and what here has it.
+    // (SmolLM2 took the apple in hand for "open the apple", and switched on the fridge for "eat
+    // the fridge".)
+    let cfg = PlannerConfig { infer_goals: true, ..defaults() };
+    for (words, told) in [
+        ("open the apple", vec!["<apple> (12)", "[OPEN] needs CAN_OPEN", "<fridge> (10)"]),
+        ("switch on the chair", vec!["<chair> (19)", "[SWITCHON] needs HAS_SWITCH"]),
+        ("eat the fridge", vec!["<fridge> (10)", "[EAT] needs EATABLE", "<apple> (12)"]),
+        ("sit on the apple", vec!["[SIT] needs SITTABLE", "<sofa> (30)"]),
+    ] {
+        let why = Rc::new(RefCell::new(String::new()));
+        let mut trace = TraceWriter::sink();
+        let seen = why.clone();
+        trace.set_echo(Box::new(move |kind, v| {
+            if kind == "goal_candidates" {
+                *seen.borrow_mut() = v["why"].as_str().unwrap_or_default().to_string();
+            }
+        }));
+        let mut m = Scripted::new(&[]);
+        let req = PlanRequest::new(words, vec![]);
+        let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut trace);
+        assert_eq!(out.stop, StopCause::Done, "{words}");
+        assert!(out.executed.is_empty() && m.scored.is_empty(), "{words}: {:?}", plan_lines(&out));
+        let root = out.tree.node(out.tree.root());
+        assert!(root.history.last().is_some_and(|(_, why)| why.starts_with("nothing to do: the words ask what")), "{:?}", root.history);
+        for t in told {
+            assert!(why.borrow().contains(t), "{words}: {t} not in {}", why.borrow());
+        }
+    }
+}
+
+#[test]
 fn a_verb_that_takes_no_object_is_all_the_root_may_do() {
     use crate::action::{ObjRef, Verb};
     use std::cell::RefCell;

@@ -88,6 +88,24 @@ impl SlotRequirement {
         }
     }
 
+    /// The requirement in words for a user: "CAN_OPEN, or a desk, or a window"; "HOLDABLE and
+    /// READABLE"; empty for any object.
+    pub fn describe(&self) -> String {
+        let word = |n: &Need| match *n {
+            Prop(p) => p.name().to_string(),
+            Class(c) => format!("a {c}"),
+            Holdable => "HOLDABLE".to_string(),
+            FoodOn => "something EATABLE on it".to_string(),
+        };
+        let all: Vec<String> = self.all.iter().map(word).collect();
+        let any: Vec<String> = self.any.iter().map(word).collect();
+        match (all.is_empty(), any.is_empty()) {
+            (_, true) => all.join(" and "),
+            (true, false) => any.join(", or "),
+            (false, false) => format!("{}, and {}", all.join(" and "), any.join(" or ")),
+        }
+    }
+
     /// Whether `node` meets the requirement in `world`'s current state.
     pub fn admits(&self, world: &World, node: &NodeView<'_>) -> bool {
         let meets = |n: &Need| match *n {
