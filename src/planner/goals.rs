@@ -471,8 +471,9 @@ const SLEPT_IN: &[&str] = &["bed"];
 /// The verbs `instruction` says that ask something of a thing ([`verbs_named`]; moves and verbs
 /// of no object aside) where none of them can be done to any of the `named` things: "open the
 /// apple", "sit on the apple", "switch on the chair" ([`SlotRequirement::of`]). Empty where one
-/// can, where the words say no such verb, or where they say a verb of no object ("sleep on the
-/// chair" is done sitting there, [`bare_postures`]). Over a whole scene, such words were read as
+/// can, where the words say no such verb outright of one of those things ([`Wording::said`]), or
+/// where they say a verb of no object ("sleep on the chair" is done sitting there,
+/// [`bare_postures`]). Over a whole scene, such words were read as
 /// being about the thing alone, and SmolLM2 took the apple in hand and said done.
 pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) -> Vec<Verb> {
     let said = verbs_named(instruction);
@@ -481,6 +482,16 @@ pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) ->
         return Vec::new();
     }
     let asked: Vec<Verb> = said.into_iter().filter(|v| !matches!(v, Verb::Walk | Verb::Run | Verb::Find)).collect();
+    // Said plainly, by its name or a phrase with a particle ("switch on", "pick up"), not by a
+    // word that has other senses ("take a shower", one of EAI's tasks, is no GRAB);
+    let words = words_of(instruction);
+    let plain: Vec<Verb> = asked.iter().copied().filter(|&v| (0..words.len()).any(|k| says_plainly(&words, k, v))).collect();
+    // and of one of the things outright ("open the apple"), not of a thing the scene does not
+    // have ("switch on mylaptop … with the mouse", another).
+    let outright = Wording::of(w, focus, instruction).said.iter().any(|(x, v)| things.contains(x) && plain.contains(v));
+    if !outright {
+        return Vec::new();
+    }
     let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
     let done_to_one = |v: Verb| {
         typed_actions(w, &objects).into_iter().any(|a| a.verb == v && a.args.iter().any(|o| things.contains(&o.id)))
@@ -488,7 +499,17 @@ pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) ->
     if asked.iter().any(|&v| done_to_one(v)) {
         return Vec::new();
     }
-    asked
+    plain
+}
+
+/// Whether word `k` of `words` says `v` by the verb's own name ([`word_names_verb`]) or begins a
+/// two-word phrase for it whose second word is a particle ([`VERB_PHRASES`]: "turn on").
+fn says_plainly(words: &[String], k: usize, v: Verb) -> bool {
+    let phrase = VERB_PHRASES.iter().filter(|(p, of)| p.len() == 2 && PARTICLES.contains(&p[1]) && of.contains(&v)).any(|(p, _)| {
+        let first = words[k] == p[0] || (p[0].len() >= 4 && words[k].starts_with(p[0]));
+        first && words.get(k + 1).is_some_and(|x| x == p[1])
+    });
+    word_names_verb(&words[k], v) || phrase
 }
 
 /// What the user is told for [`unafforded`] `verbs`: what each needs of its thing and, where the
@@ -2482,6 +2503,11 @@ mod tests {
         }
         // A verb of no object: "sleep on the chair" is done sitting there.
         assert_eq!(un("sleep on the chair"), Vec::<Verb>::new());
+        // A verb said of a thing the scene lacks, beside one it has: not said of the apple.
+        assert_eq!(un("switch on the laptop with the apple"), Vec::<Verb>::new());
+        // A word with other senses is no plain verb: "take a shower" is no GRAB of it.
+        assert_eq!(un("take a bath on the sofa"), Vec::<Verb>::new());
+        assert_eq!(un("pick up the sofa"), vec![Verb::Grab]);
         let told = unafforded_message(&w, &all, &[Verb::Open], &[12]);
         assert!(told.starts_with("the words ask what <apple> (12) cannot have done to it: [OPEN] needs CAN_OPEN, or a desk, or a window (here: <fridge> (10)"), "{told}");
     }
