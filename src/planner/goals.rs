@@ -493,9 +493,8 @@ pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) ->
         return Vec::new();
     }
     let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
-    let done_to_one = |v: Verb| {
-        typed_actions(w, &objects).into_iter().any(|a| a.verb == v && a.args.iter().any(|o| things.contains(&o.id)))
-    };
+    let typed = typed_actions(w, &objects);
+    let done_to_one = |v: Verb| typed.iter().any(|a| a.verb == v && a.args.iter().any(|o| things.contains(&o.id)));
     if asked.iter().any(|&v| done_to_one(v)) {
         return Vec::new();
     }
