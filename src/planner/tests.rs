@@ -2196,10 +2196,20 @@ fn a_goal_line_undone_again_after_it_was_offered_again_is_offered_once_more() {
     assert!(w.holds(&Fact::State { id: 10, state: State::Closed }) && w.holds(&Fact::Edge { from: 14, relation: Relation::Inside, to: 10 }));
 }
 
+/// The `why` of the trace's `goal_candidates` event, as `trace` echoes it (empty until then).
+fn goal_candidates_why(trace: &mut TraceWriter) -> std::rc::Rc<std::cell::RefCell<String>> {
+    let why = std::rc::Rc::new(std::cell::RefCell::new(String::new()));
+    let seen = why.clone();
+    trace.set_echo(Box::new(move |kind, v| {
+        if kind == "goal_candidates" {
+            *seen.borrow_mut() = v["why"].as_str().unwrap_or_default().to_string();
+        }
+    }));
+    why
+}
+
 #[test]
 fn words_that_ask_what_their_thing_cannot_do_plan_nothing_and_say_why() {
-    use std::cell::RefCell;
-    use std::rc::Rc;
     // Over the whole demo kitchen, no model is asked (the script is empty: a call would end the
     // test), nothing runs, and the trace names what the verb needs and what here has it.
     // (SmolLM2 took the apple in hand for "open the apple", and switched on the fridge for "eat
@@ -2211,14 +2221,8 @@ fn words_that_ask_what_their_thing_cannot_do_plan_nothing_and_say_why() {
         ("eat the fridge", vec!["<fridge> (10)", "[EAT] needs EATABLE", "<apple> (12)"]),
         ("sit on the apple", vec!["[SIT] needs SITTABLE", "<sofa> (30)"]),
     ] {
-        let why = Rc::new(RefCell::new(String::new()));
         let mut trace = TraceWriter::sink();
-        let seen = why.clone();
-        trace.set_echo(Box::new(move |kind, v| {
-            if kind == "goal_candidates" {
-                *seen.borrow_mut() = v["why"].as_str().unwrap_or_default().to_string();
-            }
-        }));
+        let why = goal_candidates_why(&mut trace);
         let mut m = Scripted::new(&[]);
         let req = PlanRequest::new(words, vec![]);
         let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut trace);
@@ -2235,21 +2239,13 @@ fn words_that_ask_what_their_thing_cannot_do_plan_nothing_and_say_why() {
 #[test]
 fn a_verb_that_takes_no_object_is_all_the_root_may_do() {
     use crate::action::{ObjRef, Verb};
-    use std::cell::RefCell;
-    use std::rc::Rc;
     // "stand up" said of a robot standing: nothing can run, no model is asked, and the trace
     // says why (SmolLM2, free to propose, walked to a chair and sat). The script is empty: a
     // call would end the test.
     let cfg = PlannerConfig { infer_goals: true, ..defaults() };
     let req = PlanRequest::new("stand up", vec![]);
-    let why = Rc::new(RefCell::new(String::new()));
     let mut trace = TraceWriter::sink();
-    let seen = why.clone();
-    trace.set_echo(Box::new(move |kind, v| {
-        if kind == "goal_candidates" {
-            *seen.borrow_mut() = v["why"].as_str().unwrap_or_default().to_string();
-        }
-    }));
+    let why = goal_candidates_why(&mut trace);
     let mut m = Scripted::new(&[]);
     let out = plan(&mut m, &mut SimEnv::new(World::demo(), vec![]), &req, &cfg, &mut trace);
     assert_eq!(out.stop, StopCause::Done);
