@@ -470,16 +470,18 @@ const SLEPT_IN: &[&str] = &["bed"];
 
 /// The verbs `instruction` says that ask something of a thing ([`verbs_named`]; moves and verbs
 /// of no object aside) where none of them can be done to any of the `named` things: "open the
-/// apple", "sit on the apple", "switch on the chair" ([`SlotRequirement::of`]). Empty where one
-/// can, where the words say no such verb outright of one of those things ([`Wording::said`]), or
-/// where they say a verb of no object ("sleep on the chair" is done sitting there,
-/// [`bare_postures`]). Over a whole scene, such words were read as
-/// being about the thing alone, and SmolLM2 took the apple in hand and said done.
-pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) -> Vec<Verb> {
+/// apple", "sit on the apple", "switch on the chair" ([`SlotRequirement::of`]), with what the user
+/// is told: what each needs of its thing and, where the scene has some, up to four things of
+/// `focus` that have it (the fix: name one of those). `None` where one can, where the words say
+/// no such verb outright of one of those things ([`Wording::said`]), or where they say a verb of
+/// no object ("sleep on the chair" is done sitting there, [`bare_postures`]). Over a whole
+/// scene, such words were read as being about the thing alone, and SmolLM2 took the apple in hand
+/// and said done.
+pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) -> Option<(Vec<Verb>, String)> {
     let said = verbs_named(instruction);
     let things: Vec<u32> = named.iter().copied().filter(|&id| w.node(id).is_some_and(|n| !n.is_room())).collect();
     if things.is_empty() || said.iter().any(|v| v.arity() == 0) {
-        return Vec::new();
+        return None;
     }
     let asked: Vec<Verb> = said.into_iter().filter(|v| !matches!(v, Verb::Walk | Verb::Run | Verb::Find)).collect();
     // Said plainly, by its name or a phrase with a particle ("switch on", "pick up"), not by a
@@ -488,41 +490,22 @@ pub fn unafforded(w: &World, focus: &[u32], instruction: &str, named: &[u32]) ->
     let plain: Vec<Verb> = asked.iter().copied().filter(|&v| (0..words.len()).any(|k| says_plainly(&words, k, v))).collect();
     // and of one of the things outright ("open the apple"), not of a thing the scene does not
     // have ("switch on mylaptop … with the mouse", another).
-    let outright = Wording::of(w, focus, instruction).said.iter().any(|(x, v)| things.contains(x) && plain.contains(v));
-    if !outright {
-        return Vec::new();
+    if !Wording::of(w, focus, instruction).said.iter().any(|(x, v)| things.contains(x) && plain.contains(v)) {
+        return None;
     }
-    let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
-    let typed = typed_actions(w, &objects);
-    let done_to_one = |v: Verb| typed.iter().any(|a| a.verb == v && a.args.iter().any(|o| things.contains(&o.id)));
+    // (the objects in id order, as the typed set lists them)
+    let mut objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character() && w.node(id).is_some()).collect();
+    objects.sort();
+    objects.dedup();
+    let done_to_one = |v: Verb| things.iter().any(|&x| (0..v.arity()).any(|i| typed_with(w, v, i, x, &objects)));
     if asked.iter().any(|&v| done_to_one(v)) {
-        return Vec::new();
+        return None;
     }
-    plain
-}
-
-/// Whether word `k` of `words` says `v` by the verb's own name ([`word_names_verb`]) or begins a
-/// two-word phrase for it whose second word is a particle ([`VERB_PHRASES`]: "turn on").
-fn says_plainly(words: &[String], k: usize, v: Verb) -> bool {
-    let phrase = VERB_PHRASES.iter().filter(|(p, of)| p.len() == 2 && PARTICLES.contains(&p[1]) && of.contains(&v)).any(|(p, _)| {
-        let first = words[k] == p[0] || (p[0].len() >= 4 && words[k].starts_with(p[0]));
-        first && words.get(k + 1).is_some_and(|x| x == p[1])
-    });
-    word_names_verb(&words[k], v) || phrase
-}
-
-/// What the user is told for [`unafforded`] `verbs`: what each needs of its thing and, where the
-/// scene has some, up to four things of `focus` that have it (the fix: name one of those).
-pub fn unafforded_message(w: &World, focus: &[u32], verbs: &[Verb], named: &[u32]) -> String {
     let label = |id: u32| w.node(id).map(|n| n.label()).unwrap_or_default();
-    let things: Vec<String> = named.iter().filter(|&&id| w.node(id).is_some_and(|n| !n.is_room())).map(|&id| label(id)).collect();
-    let objects: Vec<u32> = focus.iter().copied().filter(|&id| id != w.character()).collect();
-    let typed = typed_actions(w, &objects);
     let mut parts = Vec::new();
-    for &v in verbs {
+    for &v in &plain {
         let need = SlotRequirement::of(v, 0).describe();
-        let mut can: Vec<u32> = typed.iter().filter(|a| a.verb == v).filter_map(|a| a.args.first().map(|o| o.id)).collect();
-        can.dedup();
+        let can: Vec<u32> = objects.iter().copied().filter(|&x| typed_with(w, v, 0, x, &objects)).collect();
         let examples = match can.len() {
             0 => "nothing here is".to_string(),
             n => {
@@ -532,7 +515,25 @@ pub fn unafforded_message(w: &World, focus: &[u32], verbs: &[Verb], named: &[u32
         };
         parts.push(format!("[{}] needs {need} ({examples})", v.name()));
     }
-    format!("the words ask what {} cannot have done to it: {}; name a thing that can", things.join(", "), parts.join("; "))
+    let names: Vec<String> = things.iter().map(|&id| label(id)).collect();
+    let told = format!("the words ask what {} cannot have done to it: {}; name a thing that can", names.join(", "), parts.join("; "));
+    Some((plain, told))
+}
+
+/// Whether the typed set over `objects` ([`typed_actions`]) has an action of `v` with `x` in slot
+/// `i`: `x` fits that slot and every other slot is fitted by another of `objects`.
+fn typed_with(w: &World, v: Verb, i: usize, x: u32, objects: &[u32]) -> bool {
+    slot_admits(w, v, i, x) && (0..v.arity()).filter(|&j| j != i).all(|j| objects.iter().any(|&y| y != x && slot_admits(w, v, j, y)))
+}
+
+/// Whether word `k` of `words` says `v` by the verb's own name ([`word_names_verb`]) or begins a
+/// two-word phrase for it whose second word is a particle ([`VERB_PHRASES`]: "turn on").
+fn says_plainly(words: &[String], k: usize, v: Verb) -> bool {
+    let phrase = VERB_PHRASES
+        .iter()
+        .filter(|(p, of)| p.len() == 2 && PARTICLES.contains(&p[1]) && of.contains(&v))
+        .any(|(p, _)| phrase_word(&words[k], p[0]) && words.get(k + 1).is_some_and(|x| x == p[1]));
+    word_names_verb(&words[k], v) || phrase
 }
 
 /// The most objects whose candidate lines are enumerated: past it (an instruction that names
@@ -1527,7 +1528,7 @@ fn verbs_at(words: &[String], k: usize) -> (Vec<Verb>, usize) {
     let mut verbs: Vec<Verb> = Verb::ALL.iter().copied().filter(|&v| word_names_verb(&words[k], v)).collect();
     let mut end = k + 1;
     for (phrase, of) in VERB_PHRASES {
-        let fits = |(x, p): (&String, &&str)| x == p || (p.len() >= 4 && x.starts_with(p));
+        let fits = |(x, p): (&String, &&str)| phrase_word(x, p);
         let idiom = of == &[Verb::Walk] && going_to_use(words, k + phrase.len());
         if words.len() >= k + phrase.len() && words[k..].iter().zip(phrase.iter()).all(fits) && !idiom {
             verbs.extend(of.iter().filter(|v| !verbs.contains(v)).collect::<Vec<_>>());
@@ -1542,13 +1543,19 @@ fn verbs_at(words: &[String], k: usize) -> (Vec<Verb>, usize) {
 fn split_phrase_verbs(words: &[String], k: usize, at: usize) -> Vec<Verb> {
     let mut verbs: Vec<Verb> = Vec::new();
     for (phrase, of) in VERB_PHRASES.iter().filter(|(p, _)| p.len() == 2 && PARTICLES.contains(&p[1])) {
-        let first = words[k] == phrase[0] || (phrase[0].len() >= 4 && words[k].starts_with(phrase[0]));
+        let first = phrase_word(&words[k], phrase[0]);
         if first && words.get(at).is_some_and(|x| x == phrase[1]) {
             let new: Vec<Verb> = of.iter().copied().filter(|v| !verbs.contains(v)).collect();
             verbs.extend(new);
         }
     }
     verbs
+}
+
+/// Whether `word` is the phrase word `p`, or a longer form of it where `p` has four letters or
+/// more ("switched" of "switch").
+fn phrase_word(word: &str, p: &str) -> bool {
+    word == p || (p.len() >= 4 && word.starts_with(p))
 }
 
 /// Things one "goes to" to use: "go to the toilet", "go to bed" say no walk (EAI's "Go to toilet"
@@ -2490,7 +2497,8 @@ mod tests {
     fn verbs_no_named_thing_affords_are_found() {
         let w = World::demo();
         let all: Vec<u32> = w.nodes().map(|n| n.id).collect();
-        let un = |t: &str| unafforded(&w, &all, t, &instruction_objects(&w, &all, t));
+        let found = |t: &str| unafforded(&w, &all, t, &instruction_objects(&w, &all, t));
+        let un = |t: &str| found(t).map(|(verbs, _)| verbs).unwrap_or_default();
         assert_eq!(un("open the apple"), vec![Verb::Open]);
         assert_eq!(un("switch on the chair"), vec![Verb::SwitchOn]);
         assert_eq!(un("lie on the chair"), vec![Verb::Lie]);
@@ -2507,7 +2515,7 @@ mod tests {
         // A word with other senses is no plain verb: "take a shower" is no GRAB of it.
         assert_eq!(un("take a bath on the sofa"), Vec::<Verb>::new());
         assert_eq!(un("pick up the sofa"), vec![Verb::Grab]);
-        let told = unafforded_message(&w, &all, &[Verb::Open], &[12]);
+        let told = found("open the apple").map(|(_, told)| told).unwrap_or_default();
         assert!(told.starts_with("the words ask what <apple> (12) cannot have done to it: [OPEN] needs CAN_OPEN, or a desk, or a window (here: <fridge> (10)"), "{told}");
     }
 

@@ -204,10 +204,11 @@ pub(crate) fn run_tree(
     let bare_verbs = if focus_is_scene && afforded.is_empty() && said.iter().all(|v| v.arity() == 0) { said } else { Vec::new() };
     // (SmolLM2 took the apple in hand for "open the apple", and switched the fridge on for "eat
     // the fridge", and said done)
-    let cannot = env.world().filter(|_| focus_is_scene && afforded.is_empty()).and_then(|w| {
-        let verbs = goals::unafforded(w, &focus, &req.instruction, &root_objects);
-        (!verbs.is_empty()).then(|| goals::unafforded_message(w, &focus, &verbs, &root_objects))
-    });
+    let cannot = env
+        .world()
+        .filter(|_| focus_is_scene && afforded.is_empty())
+        .and_then(|w| goals::unafforded(w, &focus, &req.instruction, &root_objects))
+        .map(|(_, told)| told);
     let start_state = env.observe(&root_view, cfg.observe_budget);
     let mut run = Run {
         states: StateLog::new(&start_state),
